@@ -1,0 +1,35 @@
+"""origami_jax: a differentiable origami simulator in JAX.
+
+Fold a crease pattern by minimising the bar-and-hinge energy of the seed paper (linear springs on
+every edge, atan2-dihedral torsion springs on every crease):
+
+    >>> import origami_jax as oj
+    >>> result = oj.fold(oj.patterns.seed_waterbomb())      # doctest: +SKIP
+    >>> print(result.summary())                             # doctest: +SKIP
+
+Importing the package changes no global JAX setting; enable float64 yourself with
+``jax.config.update("jax_enable_x64", True)`` when you need it.
+"""
+
+from origami_jax.energy import FoldParams, Stiffness, build_energy, energy
+from origami_jax.fold import FoldResult, fold
+from origami_jax.pattern import ASSIGNMENTS, CreasePattern, Mesh, PatternError
+
+__all__ = [
+    "ASSIGNMENTS",
+    "CreasePattern",
+    "Mesh",
+    "PatternError",
+    "FoldParams",
+    "Stiffness",
+    "build_energy",
+    "energy",
+    "FoldResult",
+    "fold",
+]
+__version__ = "0.1.0"
+
+try:  # modules written alongside; absent ones simply are not exported yet
+    from origami_jax import patterns  # noqa: F401
+except ImportError:  # pragma: no cover
+    pass

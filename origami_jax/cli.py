@@ -1,0 +1,91 @@
+"""Command line: ``origami-jax fold INPUT|--example NAME --out OUT [options]``.
+
+Runs in float64 unless ``--float32`` is given (the CLI, unlike the library, may set JAX flags).
+Bad input prints one line ``error: ...`` and exits with code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+
+EXAMPLES = (
+    "seed_waterbomb",
+    "miura_ori",
+    "waterbomb",
+    "yoshimura",
+    "kresling",
+    "square_twist",
+    "single_crease",
+    "degree4_vertex",
+)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="origami-jax", description="Fold crease patterns with a differentiable JAX solver."
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    f = sub.add_parser("fold", help="fold a crease pattern and write the folded state")
+    f.add_argument("input", nargs="?", help="a .fold file (default: --example seed_waterbomb)")
+    f.add_argument("--example", choices=EXAMPLES, help="fold a built-in pattern instead")
+    f.add_argument(
+        "--out", help="output file: .fold, .obj, .ply, .stl or .vtu (default: <name>-folded.fold)"
+    )
+    f.add_argument("--solver", default="lbfgs", help="solver name (default: lbfgs)")
+    f.add_argument("--percent", type=float, default=100.0, help="fold percent (default: 100)")
+    f.add_argument("--tol", type=float, default=None, help="grad_norm_rel tolerance")
+    f.add_argument("--max-iter", type=int, default=100_000, help="iteration limit")
+    f.add_argument("--float32", action="store_true", help="solve in float32 (default float64)")
+    f.add_argument("--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def _load(args):
+    from origami_jax import io, patterns
+
+    if args.input and args.example:
+        raise ValueError("give an INPUT file or --example, not both")
+    if args.input:
+        return io.load(args.input)
+    name = args.example or "seed_waterbomb"
+    return getattr(patterns, name)()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    if not args.float32:
+        os.environ.setdefault("JAX_ENABLE_X64", "1")
+    import jax
+
+    jax.config.update("jax_enable_x64", not args.float32)
+    import jax.numpy as jnp
+
+    from origami_jax import PatternError, io
+    from origami_jax.fold import fold
+
+    try:
+        pattern = _load(args)
+        out = args.out or f"{pattern.name}-folded.fold"
+        result = fold(
+            pattern,
+            percent=args.percent / 100.0,
+            solver=args.solver,
+            tol=args.tol,
+            max_iter=args.max_iter,
+            dtype=jnp.float32 if args.float32 else jnp.float64,
+            progress=not args.quiet,
+        )
+        io.save(out, result)
+    except (PatternError, ValueError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(result.summary())
+    print(f"{'written':<20}  {out}")
+    return 0 if result.converged else 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

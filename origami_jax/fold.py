@@ -1,0 +1,287 @@
+"""The one entry point: :func:`fold` a crease pattern to a folded 3-D state with its error figures.
+
+The solve runs compiled, in chunks of iterations (each chunk one ``lax.while_loop``); between
+chunks the host records a ``(wall_time, error)`` sample, updates the progress bar and checks the
+iteration limit. Compiled functions are cached per (solver, array shapes and dtypes), so folding
+another pattern of the same sizes, or the same pattern with other parameters, compiles nothing.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from origami_jax.energy import FoldParams, Stiffness, make_params, make_structure
+from origami_jax.metrics import METRIC_NAMES, edge_fold_angles, position_metrics, shape_error
+from origami_jax.pattern import CreasePattern, PatternError
+from origami_jax.progress import ProgressBar
+from origami_jax.solvers import Solver, Status, get_solver
+from origami_jax.solvers.base import make_problem, positions
+
+__all__ = ["FoldResult", "fold", "default_tol"]
+
+HISTORY_FIELDS = ("iteration", "wall_time", "fold_angle_error_max", "strain_max", "energy",
+                  "grad_norm_rel")
+
+
+def default_tol(dtype) -> float:
+    """Default ``grad_norm_rel`` tolerance: 1e-10 in float64, 1e-5 in float32."""
+    return 1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5
+
+
+@dataclass
+class FoldResult:
+    """A folded state and how it was reached.
+
+    ``positions`` (V, 3): the pattern's vertices first, in its order (then copies made by cuts);
+    ``fold_angles`` (E,): per mesh edge, radians (pattern edges first, then triangulation edges;
+    0 on borders), unwrapped, so ``|angle| > pi`` means a crease folded through itself;
+    ``history``: arrays over samples, ``wall_time`` from the start of the solve (compile time
+    excluded) with ``fold_angle_error_max``, ``strain_max``, ``energy``, ``grad_norm_rel``.
+    Units: radians, seconds, the pattern's length unit.
+    """
+
+    pattern: CreasePattern
+    positions: np.ndarray
+    fold_angles: np.ndarray
+    converged: bool
+    status: Status
+    reason: str
+    iterations: int
+    solver: str
+    percent: float
+    dtype: str
+    wall_time: float
+    compile_time: float
+    fold_angle_error_max: float
+    fold_angle_error_mean: float
+    facet_angle_error_max: float
+    strain_max: float
+    strain_mean: float
+    energy: float
+    grad_norm_rel: float
+    shape_error: float | None = None
+    history: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def metrics(self) -> dict[str, float]:
+        """The metrics of metrics.md by name (shape_error only when a reference was given)."""
+        out = {name: getattr(self, name) for name in METRIC_NAMES}
+        if self.shape_error is not None:
+            out["shape_error"] = self.shape_error
+        out["wall_time"], out["compile_time"] = self.wall_time, self.compile_time
+        return out
+
+    def summary(self) -> str:
+        """A short table: sizes, solver, iterations, times and the main errors."""
+        mesh = self.pattern.mesh
+        rows = [
+            ("pattern", self.pattern.name),
+            ("vertices", f"{mesh.num_vertices}"),
+            ("edges", f"{mesh.num_edges} ({self.pattern.num_edges} in the pattern)"),
+            ("solver", f"{self.solver} ({self.dtype})"),
+            ("iterations", f"{self.iterations}"),
+            ("status", self.reason),
+            ("compile time", f"{self.compile_time:.3f} s"),
+            ("run time", f"{self.wall_time:.4f} s"),
+            ("max fold-angle error", f"{self.fold_angle_error_max:.3e} rad "
+                                     f"({np.degrees(self.fold_angle_error_max):.3e} deg)"),
+            ("max strain", f"{self.strain_max:.3e}"),
+            ("energy", f"{self.energy:.6g}"),
+            ("grad_norm_rel", f"{self.grad_norm_rel:.3e}"),
+        ]
+        if self.shape_error is not None:
+            rows.append(("shape error", f"{self.shape_error:.3e}"))
+        width = max(len(k) for k, _ in rows)
+        return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+    def __repr__(self) -> str:
+        return (
+            f"FoldResult({self.pattern.name!r}, {self.solver}, converged={self.converged}, "
+            f"iterations={self.iterations}, fold_angle_error_max={self.fold_angle_error_max:.3e},"
+            f" wall_time={self.wall_time:.4f} s)"
+        )
+
+
+# -- compiled pieces, cached per (solver, shapes) -------------------------------------------------
+
+_CACHE: dict = {}
+
+
+def _signature(tree) -> tuple:
+    leaves, treedef = jax.tree.flatten(tree)
+    return treedef, tuple((np.shape(x), jnp.result_type(x).name) for x in leaves)
+
+
+def _compiled(solver: Solver, problem, num_edges: int):
+    """(init, advance, finish) compiled for this solver and these shapes; and the compile time."""
+    key = (solver, _signature(problem), num_edges)
+    if key in _CACHE:
+        return _CACHE[key], 0.0
+
+    def advance(state, problem, steps):
+        state = solver.run(state, problem, steps)
+        x = positions(problem, state.u)
+        m = position_metrics(x, problem.structure, problem.params, state.reference)
+        m["grad_norm_rel"] = state.grad_max / jnp.where(state.grad_max0 > 0, state.grad_max0, 1)
+        return state, m
+
+    def finish(state, problem):
+        x = positions(problem, state.u)
+        return x, edge_fold_angles(x, problem.structure, state.reference, num_edges)
+
+    t0 = time.perf_counter()
+    init = jax.jit(solver.init).lower(problem).compile()
+    state_shape = jax.eval_shape(solver.init, problem)
+    steps = jax.ShapeDtypeStruct((), jnp.int32)
+    adv = jax.jit(advance).lower(state_shape, problem, steps).compile()
+    fin = jax.jit(finish).lower(state_shape, problem).compile()
+    compile_time = time.perf_counter() - t0
+    _CACHE[key] = (init, adv, fin)
+    return _CACHE[key], compile_time
+
+
+def _reason(status: Status, m: dict, tol: float, iterations: int) -> str:
+    g = m["grad_norm_rel"]
+    return {
+        Status.CONVERGED: f"converged: grad_norm_rel {g:.2e} <= tol {tol:.1e}",
+        Status.MAX_ITER: f"iteration limit {iterations} reached: grad_norm_rel {g:.2e} > "
+        f"tol {tol:.1e}",
+        Status.NONFINITE: "stopped: non-finite energy or gradient; the last finite iterate "
+        "is returned",
+        Status.STALLED: f"stalled: no decrease in several line searches at grad_norm_rel "
+        f"{g:.2e} (tol {tol:.1e}): the precision limit of this dtype",
+    }[status]
+
+
+def fold(
+    pattern: CreasePattern,
+    percent: float = 1.0,
+    solver: str | Solver = "lbfgs",
+    tol: float | None = None,
+    max_iter: int = 100_000,
+    stiffness: Stiffness | dict | None = None,
+    start: np.ndarray | None = None,
+    dtype=None,
+    reference_positions: np.ndarray | None = None,
+    progress: bool = False,
+    params: FoldParams | None = None,
+) -> FoldResult:
+    """Fold ``pattern`` to equilibrium from flat (or from ``start``).
+
+    Args:
+      pattern: the crease pattern.
+      percent: fold percent as a fraction; each crease is driven to ``percent * target``.
+      solver: a name from ``origami_jax.solvers.SOLVERS`` (``"lbfgs"``) or a solver object.
+      tol: stop when ``grad_norm_rel`` (max-abs gradient over its start value) is below this;
+        default :func:`default_tol` of the dtype.
+      max_iter: iteration limit; reaching it gives ``converged=False``.
+      stiffness: a :class:`~origami_jax.energy.Stiffness` or dict (default ``Stiffness()``).
+      start: (V_mesh, 3) start positions (default: the flat pattern).
+      dtype: ``jnp.float32`` or ``jnp.float64``; default JAX's default float (float64 only
+        when ``jax_enable_x64`` is on).
+      reference_positions: an exact folded shape (V_mesh, 3) to report ``shape_error`` against.
+      progress: show a progress bar on stderr once the solve has run for a second.
+      params: full energy parameters (overrides ``percent`` and ``stiffness``).
+
+    Returns:
+      A :class:`FoldResult`; it never holds NaN positions: a solve that meets a non-finite value
+      stops, keeps its last finite iterate, and says so in ``reason``.
+
+    Example:
+      >>> from origami_jax import fold, patterns
+      >>> result = fold(patterns.single_crease(fold_angle=1.0))
+      >>> bool(result.converged), result.fold_angle_error_max < 1e-3
+      (True, True)
+    """
+    if not isinstance(pattern, CreasePattern):
+        raise TypeError(f"fold() needs a CreasePattern, got {type(pattern).__name__}")
+    if not np.isfinite(percent):
+        raise PatternError(f"percent: must be finite, got {percent}")
+    if int(max_iter) < 0:
+        raise ValueError(f"max_iter must be >= 0, got {max_iter}")
+    solver_obj = get_solver(solver)
+    dtype = jnp.dtype(dtype or jnp.result_type(float))
+    if dtype == jnp.float64 and not jax.config.jax_enable_x64:
+        raise ValueError(
+            "float64 needs jax.config.update('jax_enable_x64', True) (or JAX_ENABLE_X64=1)"
+        )
+    tol = default_tol(dtype) if tol is None else float(tol)
+    mesh = pattern.mesh
+    if start is not None:
+        start = np.asarray(start, np.float64)
+        if start.shape != mesh.vertices.shape:
+            raise PatternError(f"start: expected shape {mesh.vertices.shape}, got {start.shape}")
+        bad = ~np.isfinite(start).all(axis=1)
+        if bad.any():
+            raise PatternError(f"start: vertex {int(np.flatnonzero(bad)[0])} is not finite")
+    if params is None:
+        params = make_params(pattern, percent, stiffness, dtype)
+    else:
+        params = jax.tree.map(lambda a: jnp.asarray(a, dtype), params)
+        percent = float(params.percent)
+    problem = make_problem(mesh, make_structure(mesh), params, start, tol)
+
+    (init, advance, finish), compile_time = _compiled(solver_obj, problem, mesh.num_edges)
+
+    t0 = time.perf_counter()
+    state, m = advance(init(problem), problem, jnp.int32(0))
+    samples = [_sample(state, m, 0.0)]
+    bar = ProgressBar(max_iter) if progress else None
+    chunk, iterations = 1, 0
+    while int(state.status) == Status.RUNNING and iterations < max_iter:
+        steps = min(chunk, max_iter - iterations)
+        t_chunk = time.perf_counter()
+        state, m = advance(state, problem, jnp.int32(steps))
+        m = jax.device_get(m)
+        now = time.perf_counter()
+        iterations = int(state.iteration)
+        samples.append(_sample(state, m, now - t0))
+        if bar is not None:
+            bar.update(iterations, f"err {float(m['fold_angle_error_max']):.2e} rad")
+        # grow chunks geometrically, then keep each to about a tenth of a second
+        per_step = (now - t_chunk) / max(steps, 1)
+        chunk = max(1, min(2 * chunk, int(0.1 / max(per_step, 1e-9))))
+    x, angles = finish(state, problem)
+    wall_time = time.perf_counter() - t0
+    if bar is not None:
+        bar.close()
+
+    status = Status(int(state.status))
+    if status == Status.RUNNING:
+        status = Status.MAX_ITER
+    m = {k: float(v) for k, v in jax.device_get(m).items()}
+    x = np.asarray(x, np.float64)
+    shape_err = None
+    if reference_positions is not None:
+        shape_err = shape_error(x, reference_positions, pattern.diameter)
+    history = {k: np.array([s[k] for s in samples]) for k in HISTORY_FIELDS}
+    return FoldResult(
+        pattern=pattern,
+        positions=x,
+        fold_angles=np.asarray(angles, np.float64),
+        converged=status == Status.CONVERGED,
+        status=status,
+        reason=_reason(status, m, tol, iterations),
+        iterations=int(state.iteration),
+        solver=solver_obj.name,
+        percent=float(percent),
+        dtype=dtype.name,
+        wall_time=wall_time,
+        compile_time=compile_time,
+        shape_error=shape_err,
+        history=history,
+        **{k: m[k] for k in METRIC_NAMES},
+    )
+
+
+def _sample(state, m, t: float) -> dict:
+    out = {k: float(m[k]) for k in ("fold_angle_error_max", "strain_max", "energy",
+                                     "grad_norm_rel")}
+    out["iteration"] = int(state.iteration)
+    out["wall_time"] = t
+    return out

@@ -1,0 +1,57 @@
+"""Geometric kernels: bar lengths and atan2 fold angles, with gradients finite everywhere.
+
+Shapes: ``x`` is (V, 3) positions; ``bars`` (E, 2) and ``hinges`` (H, 4) are vertex indices.
+A hinge ``(i, j, k, l)`` is the edge ``i -> j`` with ``k`` the third vertex of the triangle on
+its left and ``l`` of the one on its right (in the flat, counterclockwise pattern).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import Array
+
+__all__ = ["safe_norm", "bar_lengths", "fold_angles", "wrap_angle"]
+
+
+def safe_norm(v: Array, axis: int = -1) -> Array:
+    """Euclidean norm whose gradient is 0 (not NaN) at the zero vector."""
+    sq = jnp.sum(v * v, axis=axis)
+    positive = sq > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, sq, 1.0)), 0.0)
+
+
+def bar_lengths(x: Array, bars: Array) -> Array:
+    """(E,) current lengths of the bars."""
+    return safe_norm(x[bars[:, 1]] - x[bars[:, 0]])
+
+
+def wrap_angle(a: Array) -> Array:
+    """Map angles to (-pi, pi]."""
+    return a - 2 * jnp.pi * jnp.ceil((a - jnp.pi) / (2 * jnp.pi))
+
+
+def fold_angles(x: Array, hinges: Array, reference: Array | None = None) -> Array:
+    """(H,) fold angles in radians: valley positive, mountain negative, flat 0.
+
+    ``rho = atan2(((n_r x n_l) . e_hat), n_l . n_r)`` with ``n_l``, ``n_r`` the normals of the
+    triangles left and right of the edge: the seed's atan2 dihedral, ``rho = pi - theta``.
+
+    Without ``reference`` the result lies in (-pi, pi]. With a (H,) ``reference`` the result is
+    the branch closest to it, ``reference + angle in (-pi, pi]``, so a crease can be followed
+    continuously through +-pi (unwrapping against a previous iterate); the gradient does not
+    depend on the reference.
+    """
+    i, j, k, l = hinges[:, 0], hinges[:, 1], hinges[:, 2], hinges[:, 3]
+    e = x[j] - x[i]
+    e_hat = e / jnp.maximum(safe_norm(e), jnp.finfo(x.dtype).tiny)[:, None]
+    n_left = jnp.cross(e_hat, x[k] - x[i])
+    n_right = jnp.cross(x[l] - x[i], e_hat)
+    sin_part = jnp.sum(jnp.cross(n_right, n_left) * e_hat, axis=-1)
+    cos_part = jnp.sum(n_left * n_right, axis=-1)
+    if reference is not None:
+        c, s = jnp.cos(reference), jnp.sin(reference)
+        sin_part, cos_part = sin_part * c - cos_part * s, cos_part * c + sin_part * s
+    # atan2(0, 0) has a NaN gradient: only for a collapsed triangle, where any finite value will do
+    degenerate = (sin_part == 0) & (cos_part == 0)
+    angle = jnp.arctan2(sin_part, jnp.where(degenerate, 1.0, cos_part))
+    return angle if reference is None else reference + angle

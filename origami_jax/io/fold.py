@@ -1,0 +1,657 @@
+"""Reading and writing FOLD 1.2 files (``.fold``, JSON).
+
+Reading (:func:`from_fold_dict`, :func:`load_fold`)
+----------------------------------------------------
+
+The keys read are ``vertices_coords``, ``edges_vertices``, ``edges_assignment``,
+``edges_foldAngle`` (degrees in FOLD, radians in :class:`~origami_jax.CreasePattern`; the pre-1.1
+spelling ``edges_foldAngles`` is accepted too) and ``faces_vertices``; everything else is ignored.
+
+* A missing ``edges_foldAngle`` gives the pattern's defaults, -180 degrees for ``M``, +180 for
+  ``V``, 0 otherwise; a ``null`` entry gives that default for its edge.
+* A missing ``edges_assignment`` is left to the pattern: ``B`` on edges with one face, ``U``
+  elsewhere.
+* A missing ``edges_vertices`` (with no ``edges_assignment`` or ``edges_foldAngle``) is computed
+  from the sides of the faces; a missing ``faces_vertices`` is an error.
+* Coordinates are ``[x, y]`` or ``[x, y, z]`` with ``z = 0``: a crease pattern is flat.
+* ``file_spec`` is not checked.
+
+Frames: frame 0 is the top level, frame ``k >= 1`` is ``file_frames[k - 1]``. A frame with
+``frame_inherit: true`` takes the keys it does not set from its ``frame_parent`` (frame 0 when the
+parent is not given), recursively. Without an explicit ``frame``, the top level is read, unless
+its ``frame_classes`` say ``foldedForm`` (and not ``creasePattern``) and some frame of
+``file_frames`` has the class ``creasePattern``: then the first such frame is read. A frame of
+class ``foldedForm`` read as a crease pattern must be an unfolded state: flat, all faces
+counterclockwise; otherwise the error says it is a folded form.
+
+Every malformed input raises :class:`~origami_jax.PatternError` naming the key and element, for
+example ``"edges_vertices[3]: vertex index 9 is out of range (the frame has 9 vertices)"``; errors
+found in a frame other than the top level start with ``"frame k (file_frames[k-1]): "`` and those
+of :func:`load_fold` with the file's path.
+
+Writing (:func:`to_fold_dict`, :func:`save_fold`)
+--------------------------------------------------
+
+The top level is the crease pattern: ``file_spec`` 1.2, ``file_creator`` ``"origami_jax"``,
+``file_classes`` ``["singleModel"]``, ``frame_title`` (the pattern's name), ``frame_classes``
+``["creasePattern"]``, ``frame_attributes`` ``["2D"]`` (plus ``"cuts"`` / ``"joins"`` when the
+pattern has ``C`` / ``J`` edges, as the spec recommends), 2-D ``vertices_coords``,
+``edges_vertices``, ``edges_assignment``, ``edges_foldAngle`` (degrees, always written) and the
+counterclockwise ``faces_vertices``.
+
+With a simulation result (any object with ``pattern``, ``positions`` (V_mesh, 3) and
+``fold_angles`` (E_mesh,) radians, in the order of ``pattern.mesh``), ``file_frames`` holds one
+frame of class ``foldedForm``, attributes ``["3D"]``:
+
+* when the mesh has as many vertices as the pattern (no vertex was split by a cut), the frame has
+  ``frame_parent: 0``, ``frame_inherit: true`` and only ``vertices_coords`` (3-D) and
+  ``edges_foldAngle`` (simulated, degrees, of mesh edges ``0 .. E-1``, which are the pattern's
+  edges);
+* otherwise it has ``frame_parent: 0``, ``frame_inherit: false`` and the mesh's own topology:
+  ``vertices_coords`` (3-D, mesh vertices), ``edges_vertices`` (mesh edges), ``edges_assignment``
+  (the source pattern edge's letter; ``B`` for both sides of a cut, which are border edges of the
+  split mesh; ``J`` for triangulation edges, the spec's letter for edges added for simulation,
+  and then ``"joins"`` is added to ``frame_attributes``), ``edges_foldAngle`` (simulated,
+  degrees) and ``faces_vertices`` (the mesh triangles).
+
+Simulated fold angles of border edges (mesh role ``"border"``) are written as 0. Simulated angles
+are written as they are, so a mountain that is not folded yet may carry a small positive angle.
+
+Files are written atomically: the text goes to a temporary file in the same folder, which then
+replaces the target (:func:`os.replace`); on any error the temporary file is removed and an
+existing target is left untouched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import numbers
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from origami_jax.pattern import ASSIGNMENTS, CreasePattern, PatternError
+
+__all__ = ["from_fold_dict", "load_fold", "to_fold_dict", "save_fold"]
+
+FILE_SPEC = 1.2
+FILE_CREATOR = "origami_jax"
+
+# the frame keys read; inheritance (frame_inherit) covers every key except these
+_NOT_INHERITED = ("frame_parent", "frame_inherit")
+_DEFAULT_DEGREES = {"M": -180.0, "V": 180.0}
+
+
+# ---------------------------------------------------------------------------------------------
+# small type checks (JSON values: int, float, str, list, dict, bool, None)
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, (numbers.Real, np.integer, np.floating)) and not isinstance(
+        x, (bool, np.bool_)
+    )
+
+
+def _is_index(x: Any) -> bool:
+    if isinstance(x, (bool, np.bool_)):
+        return False
+    if isinstance(x, (numbers.Integral, np.integer)):
+        return True
+    return isinstance(x, (float, np.floating)) and math.isfinite(x) and float(x).is_integer()
+
+
+def _type_name(x: Any) -> str:
+    if x is None:
+        return "null"
+    if isinstance(x, (bool, np.bool_)):
+        return "a boolean"
+    if isinstance(x, str):
+        return f"the string {x!r}" if len(x) <= 20 else "a string"
+    if isinstance(x, dict):
+        return "an object"
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return "an array"
+    if _is_number(x):
+        return f"the number {x!r}"
+    return type(x).__name__
+
+
+def _array(value: Any, key: str) -> list:
+    """A JSON array (list, tuple or numpy array) as a list, or a PatternError naming ``key``."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (list, tuple)):
+        return list(value)
+    raise PatternError(f"{key}: expected an array, got {_type_name(value)}")
+
+
+def _float(x: Any, what: str) -> float:
+    if not _is_number(x):
+        raise PatternError(f"{what}: expected a number, got {_type_name(x)}")
+    try:
+        f = float(x)
+    except OverflowError:
+        f = math.inf
+    if not math.isfinite(f):
+        raise PatternError(f"{what}: expected a finite number, got {x!r}")
+    return f
+
+
+# ---------------------------------------------------------------------------------------------
+# frames
+
+
+def _frames(data: dict) -> list[dict]:
+    if "file_frames" not in data:
+        return []
+    frames = _array(data["file_frames"], "file_frames")
+    for i, fr in enumerate(frames):
+        if not isinstance(fr, dict):
+            raise PatternError(
+                f"file_frames[{i}]: expected an object (a frame), got {_type_name(fr)}"
+            )
+    return frames
+
+
+def _frame_name(k: int) -> str:
+    return "the top level (frame 0)" if k == 0 else f"frame {k} (file_frames[{k - 1}])"
+
+
+def _classes(frame: dict, k: int) -> list[str]:
+    if "frame_classes" not in frame:
+        return []
+    where = "" if k == 0 else f"file_frames[{k - 1}]: "
+    classes = _array(frame["frame_classes"], f"{where}frame_classes")
+    for i, c in enumerate(classes):
+        if not isinstance(c, str):
+            raise PatternError(f"{where}frame_classes[{i}]: expected a string, got {_type_name(c)}")
+    return classes
+
+
+def _choose_frame(data: dict, frames: list[dict]) -> int:
+    top = _classes(data, 0)
+    if "foldedForm" in top and "creasePattern" not in top:
+        for i, fr in enumerate(frames):
+            if "creasePattern" in _classes(fr, i + 1):
+                return i + 1
+    return 0
+
+
+def _resolve(data: dict, frames: list[dict], k: int) -> dict:
+    """Frame ``k``'s keys, with inheritance resolved (file_... keys of the top level dropped)."""
+    chain: list[int] = []
+    while True:
+        if k in chain:
+            cycle = " -> ".join(str(c) for c in [*chain, k])
+            raise PatternError(f"file_frames: frame_parent makes a cycle (frames {cycle})")
+        chain.append(k)
+        if k == 0:
+            break
+        fr = frames[k - 1]
+        inherit = fr.get("frame_inherit", False)
+        if not isinstance(inherit, (bool, np.bool_)):
+            raise PatternError(
+                f"file_frames[{k - 1}].frame_inherit: expected true or false, "
+                f"got {_type_name(inherit)}"
+            )
+        if not inherit:
+            break
+        parent = fr.get("frame_parent", 0)
+        if not _is_index(parent) or not 0 <= int(parent) <= len(frames):
+            raise PatternError(
+                f"file_frames[{k - 1}].frame_parent: expected a frame number 0..{len(frames)}, "
+                f"got {_type_name(parent)}"
+            )
+        k = int(parent)
+    out: dict = {}
+    for j in reversed(chain):  # ancestors first, the frame itself last
+        src = data if j == 0 else frames[j - 1]
+        for key, value in src.items():
+            if j == 0 and key.startswith("file_"):
+                continue
+            if key in _NOT_INHERITED:
+                continue
+            out[key] = value
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# reading
+
+
+def from_fold_dict(data: dict, frame: int | None = None) -> CreasePattern:
+    """The crease pattern of a FOLD dictionary (a parsed ``.fold`` file).
+
+    Args:
+      data: the FOLD top-level object.
+      frame: the frame to read, 0 for the top level, ``k`` for ``file_frames[k - 1]``; by
+        default the crease-pattern frame (see the module docstring).
+
+    Raises:
+      PatternError: naming the key and element at fault.
+    """
+    if not isinstance(data, dict):
+        raise PatternError(
+            f"FOLD data: expected a JSON object at the top level, got {_type_name(data)}"
+        )
+    frames = _frames(data)
+    if frame is None:
+        k = _choose_frame(data, frames)
+    else:
+        if not _is_index(frame) or not 0 <= int(frame) <= len(frames):
+            raise PatternError(
+                f"frame {frame!r}: no such frame (the file has frames 0..{len(frames)}: "
+                f"0 is the top level, k is file_frames[k-1])"
+            )
+        k = int(frame)
+    fr = _resolve(data, frames, k)
+    prefix = "" if k == 0 else f"{_frame_name(k)}: "
+    try:
+        classes = _classes(fr, 0)
+        name = fr.get("frame_title", data.get("file_title", "pattern"))
+        if not isinstance(name, str) or not name:
+            name = "pattern"
+        return _read_frame(
+            fr,
+            name,
+            folded="foldedForm" in classes and "creasePattern" not in classes,
+            chosen=frame is None,
+        )
+    except PatternError as exc:
+        raise PatternError(f"{prefix}{exc}") from None
+
+
+def _read_frame(fr: dict, name: str, folded: bool, chosen: bool) -> CreasePattern:
+    vertices = _read_vertices(fr)
+    nv = len(vertices)
+    if "faces_vertices" not in fr:
+        raise PatternError(
+            "faces_vertices missing: the frame has no faces, and computing faces from the edges "
+            "is not supported yet; add faces_vertices (one counterclockwise array of vertex "
+            "indices per face)"
+        )
+    faces = _read_index_lists(fr["faces_vertices"], "faces_vertices", nv, exact=None)
+    if folded:
+        _check_unfolded(vertices, faces, chosen)
+    else:
+        _check_flat(vertices)
+
+    angle_key = "edges_foldAngle" if "edges_foldAngle" in fr else "edges_foldAngles"
+    if "edges_vertices" in fr:
+        edges = _read_index_lists(fr["edges_vertices"], "edges_vertices", nv, exact=2)
+    elif "edges_assignment" in fr or angle_key in fr:
+        raise PatternError(
+            "edges_vertices missing: the frame has edges_assignment or edges_foldAngle "
+            "but no edges_vertices to attach them to"
+        )
+    else:
+        edges = _edges_of_faces(faces)
+    ne = len(edges)
+
+    assignments = None
+    if "edges_assignment" in fr:
+        letters = _array(fr["edges_assignment"], "edges_assignment")
+        if len(letters) != ne:
+            raise PatternError(
+                f"edges_assignment: has {len(letters)} entries, but edges_vertices has {ne} edges"
+            )
+        assignments = []
+        for i, a in enumerate(letters):
+            if not isinstance(a, str) or a.upper() not in tuple(ASSIGNMENTS):
+                raise PatternError(
+                    f"edges_assignment[{i}]: expected one of the letters "
+                    f"{', '.join(ASSIGNMENTS)}, got {_type_name(a)}"
+                )
+            assignments.append(a.upper())
+
+    fold_angles = None
+    if angle_key in fr:
+        degrees = _array(fr[angle_key], angle_key)
+        if len(degrees) != ne:
+            raise PatternError(
+                f"{angle_key}: has {len(degrees)} entries, but edges_vertices has {ne} edges"
+            )
+        rad = np.empty(ne)
+        for i, d in enumerate(degrees):
+            if d is None:
+                default = _DEFAULT_DEGREES.get(assignments[i], 0.0) if assignments else 0.0
+                rad[i] = math.radians(default)
+                continue
+            deg = _float(d, f"{angle_key}[{i}]")
+            if abs(deg) > 180.0 * (1 + 1e-12):
+                raise PatternError(f"{angle_key}[{i}]: {deg:g} degrees is outside [-180, 180]")
+            rad[i] = math.radians(deg)
+        fold_angles = rad
+
+    return CreasePattern(
+        vertices=vertices,
+        edges=np.array(edges, dtype=np.int64).reshape(-1, 2),
+        faces=tuple(tuple(f) for f in faces),
+        assignments=assignments,
+        fold_angles=fold_angles,
+        name=name,
+    )
+
+
+def _read_vertices(fr: dict) -> np.ndarray:
+    if "vertices_coords" not in fr:
+        raise PatternError("vertices_coords missing: the frame has no vertex coordinates")
+    coords = _array(fr["vertices_coords"], "vertices_coords")
+    if not coords:
+        raise PatternError("vertices_coords: is empty")
+    out = np.zeros((len(coords), 3))
+    for i, c in enumerate(coords):
+        what = f"vertices_coords[{i}]"
+        if not isinstance(c, (list, tuple, np.ndarray)):
+            raise PatternError(f"{what}: expected an array of 2 or 3 numbers, got {_type_name(c)}")
+        c = list(c)
+        if len(c) not in (2, 3):
+            raise PatternError(f"{what}: expected 2 or 3 coordinates, got {len(c)}")
+        for j, x in enumerate(c):
+            out[i, j] = _float(x, f"{what}[{j}]")
+    return out
+
+
+def _read_index_lists(value: Any, key: str, nv: int, exact: int | None) -> list[list[int]]:
+    rows = _array(value, key)
+    out = []
+    for i, row in enumerate(rows):
+        what = f"{key}[{i}]"
+        if not isinstance(row, (list, tuple, np.ndarray)):
+            raise PatternError(
+                f"{what}: expected an array of vertex indices, got {_type_name(row)}"
+            )
+        row = list(row)
+        if exact is not None and len(row) != exact:
+            raise PatternError(f"{what}: expected {exact} vertex indices, got {len(row)}")
+        if exact is None and len(row) < 3:
+            raise PatternError(f"{what}: a face needs at least 3 vertices, got {len(row)}")
+        idx = []
+        for j, v in enumerate(row):
+            if not _is_index(v):
+                raise PatternError(f"{what}[{j}]: expected a vertex index, got {_type_name(v)}")
+            v = int(v)
+            if not 0 <= v < nv:
+                raise PatternError(
+                    f"{what}: vertex index {v} is out of range (the frame has {nv} vertices)"
+                )
+            idx.append(v)
+        out.append(idx)
+    if not out:
+        raise PatternError(f"{key}: is empty")
+    return out
+
+
+def _edges_of_faces(faces: list[list[int]]) -> list[list[int]]:
+    seen: set[tuple[int, int]] = set()
+    edges = []
+    for f in faces:
+        for a, b in zip(f, f[1:] + f[:1], strict=True):
+            key = (min(a, b), max(a, b))
+            if key not in seen:
+                seen.add(key)
+                edges.append([a, b])
+    return edges
+
+
+def _scale(vertices: np.ndarray) -> float:
+    return max(float(np.abs(vertices[:, :2]).max()), 1e-300)
+
+
+def _check_flat(vertices: np.ndarray) -> None:
+    off = np.flatnonzero(np.abs(vertices[:, 2]) > 1e-12 * _scale(vertices))
+    if len(off):
+        i = int(off[0])
+        raise PatternError(
+            f"vertices_coords[{i}]: z = {vertices[i, 2]:g}, but a crease pattern must be flat "
+            f"(z = 0); {len(off)} vertices are off the plane"
+        )
+
+
+def _check_unfolded(vertices: np.ndarray, faces: list[list[int]], chosen: bool) -> None:
+    """A foldedForm frame read as a crease pattern must be the unfolded state."""
+    intro = "the frame is a folded form (frame_classes foldedForm), not a crease pattern"
+    if chosen:
+        intro += ", and the file has no creasePattern frame to read instead"
+    off = np.flatnonzero(np.abs(vertices[:, 2]) > 1e-12 * _scale(vertices))
+    if len(off):
+        i = int(off[0])
+        raise PatternError(
+            f"{intro}: vertices_coords[{i}] has z = {vertices[i, 2]:g} "
+            f"({len(off)} vertices are off the plane z = 0)"
+        )
+    for f, face in enumerate(faces):
+        p = vertices[face, :2]
+        area = 0.5 * float(
+            np.dot(p[:, 0], np.roll(p[:, 1], -1)) - np.dot(np.roll(p[:, 0], -1), p[:, 1])
+        )
+        if area < 0:
+            raise PatternError(
+                f"{intro}: faces_vertices[{f}] is clockwise (flipped over by the folding)"
+            )
+
+
+def load_fold(path: str | os.PathLike, frame: int | None = None) -> CreasePattern:
+    """The crease pattern of a ``.fold`` file (see :func:`from_fold_dict`).
+
+    The pattern's name is the frame's ``frame_title``, else ``file_title``, else the file name
+    without its suffix.
+
+    Raises:
+      PatternError: the file cannot be read, is not valid JSON, or is not a valid pattern; the
+        message starts with the path.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")  # a BOM is tolerated
+    except (OSError, UnicodeDecodeError) as exc:
+        raise PatternError(f"{path}: cannot read the FOLD file ({exc})") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise PatternError(
+            f"{path}: invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
+        ) from None
+    except RecursionError:
+        raise PatternError(f"{path}: invalid JSON (nested too deeply)") from None
+    try:
+        if isinstance(data, dict) and "file_title" not in data:
+            data = {**data, "file_title": path.stem}
+        return from_fold_dict(data, frame=frame)
+    except PatternError as exc:
+        raise PatternError(f"{path}: {exc}") from None
+
+
+# ---------------------------------------------------------------------------------------------
+# writing
+
+
+def _split(obj: Any) -> tuple[CreasePattern, np.ndarray | None, np.ndarray | None]:
+    """(pattern, positions, fold_angles) of a CreasePattern (None, None) or of a result."""
+    if isinstance(obj, CreasePattern):
+        return obj, None, None
+    if all(hasattr(obj, a) for a in ("pattern", "positions", "fold_angles")):
+        pattern = obj.pattern
+        if not isinstance(pattern, CreasePattern):
+            raise TypeError(
+                f"result.pattern: expected a CreasePattern, got {type(pattern).__name__}"
+            )
+        return (pattern, *_result_arrays(pattern, obj.positions, obj.fold_angles))
+    raise TypeError(
+        "expected a CreasePattern or a result with attributes pattern, positions and "
+        f"fold_angles, got {type(obj).__name__}"
+    )
+
+
+def _result_arrays(pattern: CreasePattern, positions: Any, fold_angles: Any):
+    """A result's positions and fold angles as float arrays, their shapes checked."""
+    mesh = pattern.mesh
+    try:
+        x = np.asarray(positions, dtype=np.float64)
+        rho = np.asarray(fold_angles, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(
+            f"result: positions and fold_angles must be numeric arrays ({exc})"
+        ) from None
+    if x.shape != (mesh.num_vertices, 3):
+        raise ValueError(
+            f"result.positions: expected shape ({mesh.num_vertices}, 3) (one row per mesh "
+            f"vertex), got {x.shape}"
+        )
+    if rho.shape != (mesh.num_edges,):
+        raise ValueError(
+            f"result.fold_angles: expected shape ({mesh.num_edges},) (one per mesh edge), "
+            f"got {rho.shape}"
+        )
+    return x, rho
+
+
+def _check_finite(array: np.ndarray, what: str) -> None:
+    bad = ~np.isfinite(array)
+    if bad.any():
+        i = int(np.flatnonzero(bad.reshape(len(array), -1).any(axis=1))[0])
+        raise ValueError(f"{what}[{i}]: non-finite value {array[i].tolist()} cannot be written")
+
+
+def _degrees(radians: np.ndarray) -> list[float]:
+    return [float(x) for x in np.degrees(radians)]
+
+
+def to_fold_dict(pattern: CreasePattern, result: Any = None) -> dict:
+    """The FOLD 1.2 dictionary of a pattern, with the folded state of ``result`` if given.
+
+    Args:
+      pattern: the crease pattern (the top-level frame).
+      result: ``None`` or an object with ``positions`` ((V_mesh, 3), mesh vertex order) and
+        ``fold_angles`` ((E_mesh,) radians); written as ``file_frames[0]``, a ``foldedForm``
+        frame (see the module docstring). Its ``pattern`` attribute, if any, is not used.
+
+    Raises:
+      ValueError: the result's arrays have the wrong shape or non-finite values.
+    """
+    if not isinstance(pattern, CreasePattern):
+        raise TypeError(f"pattern: expected a CreasePattern, got {type(pattern).__name__}")
+    attributes = ["2D"]
+    if (pattern.assignments == "C").any():
+        attributes.append("cuts")
+    if (pattern.assignments == "J").any():
+        attributes.append("joins")
+    out: dict = {
+        "file_spec": FILE_SPEC,
+        "file_creator": FILE_CREATOR,
+        "file_classes": ["singleModel"],
+        "frame_title": pattern.name,
+        "frame_classes": ["creasePattern"],
+        "frame_attributes": attributes,
+        "vertices_coords": [[float(x), float(y)] for x, y in pattern.vertices[:, :2]],
+        "edges_vertices": [[int(a), int(b)] for a, b in pattern.edges],
+        "edges_assignment": [str(a) for a in pattern.assignments],
+        "edges_foldAngle": _degrees(pattern.fold_angles),
+        "faces_vertices": [[int(v) for v in f] for f in pattern.faces],
+    }
+    if result is not None:
+        positions, angles = _result_arrays(pattern, result.positions, result.fold_angles)
+        out["file_frames"] = [_folded_frame(pattern, positions, angles)]
+    return out
+
+
+def _folded_frame(pattern: CreasePattern, positions: np.ndarray, angles: np.ndarray) -> dict:
+    mesh = pattern.mesh
+    _check_finite(positions, "result.positions")
+    _check_finite(angles, "result.fold_angles")
+    angles = np.where(mesh.role == "border", 0.0, angles)
+    coords = [[float(x), float(y), float(z)] for x, y, z in positions]
+    if mesh.num_vertices == pattern.num_vertices:
+        return {
+            "frame_classes": ["foldedForm"],
+            "frame_attributes": ["3D"],
+            "frame_parent": 0,
+            "frame_inherit": True,
+            "vertices_coords": coords,
+            "edges_foldAngle": _degrees(angles[: pattern.num_edges]),
+        }
+    letters = []
+    for src, role in zip(mesh.source_edge, mesh.role, strict=True):
+        if src < 0:
+            letters.append("J")
+        elif role == "border":
+            letters.append("B")
+        else:
+            letters.append(str(pattern.assignments[src]))
+    attributes = ["3D"]
+    if "J" in letters:
+        attributes.append("joins")
+    return {
+        "frame_classes": ["foldedForm"],
+        "frame_attributes": attributes,
+        "frame_parent": 0,
+        "frame_inherit": False,
+        "vertices_coords": coords,
+        "edges_vertices": [[int(a), int(b)] for a, b in mesh.edges],
+        "edges_assignment": letters,
+        "edges_foldAngle": _degrees(angles),
+        "faces_vertices": [[int(v) for v in t] for t in mesh.triangles],
+    }
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
+    """A temporary path beside ``path`` that replaces ``path`` when the block succeeds.
+
+    The temporary file has the same suffix as ``path`` (or ``suffix``), so writers that choose
+    the format by suffix see the right one. On any error it is removed and ``path`` is left as it
+    was. The new file gets the usual permissions (``0o666`` less the umask).
+    """
+    path = Path(path)
+    folder = path.parent
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{path}: the folder {folder} does not exist")
+    fd, tmp = tempfile.mkstemp(
+        dir=folder, prefix=f".{path.name}.", suffix=path.suffix if suffix is None else suffix
+    )
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        with contextlib.suppress(OSError):
+            os.chmod(tmp_path, 0o666 & ~_UMASK)
+        os.replace(tmp_path, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp_path.unlink()
+        raise
+
+
+def _read_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _read_umask()
+
+
+def save_fold(path: str | os.PathLike, pattern_or_result: Any) -> None:
+    """Write a crease pattern, or a simulation result, to a ``.fold`` file, atomically.
+
+    A result (detected by its ``pattern``, ``positions`` and ``fold_angles`` attributes) is
+    written as its pattern plus a ``foldedForm`` frame (see :func:`to_fold_dict`).
+
+    Raises:
+      TypeError: not a CreasePattern nor a result.
+      ValueError: the result's arrays have the wrong shape or non-finite values.
+      OSError: the file cannot be written (nothing is left behind).
+    """
+    pattern, positions, angles = _split(pattern_or_result)
+    data = to_fold_dict(pattern, None if positions is None else pattern_or_result)
+    text = json.dumps(data, indent=1, allow_nan=False) + "\n"
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())

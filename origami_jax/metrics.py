@@ -1,0 +1,86 @@
+"""Error measures, under the names of ../shared/reference/metrics.md.
+
+* ``fold_angle_error_max``, ``fold_angle_error_mean``: over driven creases,
+  ``|rho - percent * rho_target|``, radians;
+* ``facet_angle_error_max``: over facet creases, ``|rho|``, radians;
+* ``strain_max``, ``strain_mean``: over all bars, ``|l / l0 - 1|``;
+* ``energy``: total energy at the result, energy units of the model;
+* ``grad_norm_rel``: max-abs energy gradient divided by its value at the start of the solve;
+* ``shape_error``: RMS vertex distance after optimal rigid alignment (Kabsch) divided by the
+  flat sheet's diameter.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from origami_jax.energy import FoldParams, HingeReference, Structure, energy
+from origami_jax.geometry import bar_lengths, fold_angles
+
+__all__ = ["position_metrics", "edge_fold_angles", "kabsch_align", "shape_error", "METRIC_NAMES"]
+
+METRIC_NAMES = (
+    "fold_angle_error_max",
+    "fold_angle_error_mean",
+    "facet_angle_error_max",
+    "strain_max",
+    "strain_mean",
+    "energy",
+    "grad_norm_rel",
+)
+
+
+def position_metrics(
+    x: Array, s: Structure, p: FoldParams, reference: HingeReference
+) -> dict[str, Array]:
+    """The metrics of metrics.md that depend on positions only (radians, dimensionless, energy)."""
+    zero = jnp.zeros((), x.dtype)
+    out = {}
+    strain = jnp.abs(bar_lengths(x, s.bars) / p.rest_length - 1.0)
+    out["strain_max"] = jnp.max(strain)
+    out["strain_mean"] = jnp.mean(strain)
+    if s.creases.shape[0]:
+        rho = fold_angles(x, s.creases, reference.creases)
+        err = jnp.abs(rho - p.percent * p.target)
+        out["fold_angle_error_max"] = jnp.max(err)
+        out["fold_angle_error_mean"] = jnp.mean(err)
+    else:
+        out["fold_angle_error_max"] = out["fold_angle_error_mean"] = zero
+    if s.facets.shape[0]:
+        out["facet_angle_error_max"] = jnp.max(jnp.abs(fold_angles(x, s.facets, reference.facets)))
+    else:
+        out["facet_angle_error_max"] = zero
+    out["energy"] = energy(x, s, p, reference)
+    return out
+
+
+def edge_fold_angles(x: Array, s: Structure, reference: HingeReference, num_edges: int) -> Array:
+    """(E,) fold angle of every mesh edge (radians; 0 on borders), unwrapped where tracked."""
+    out = jnp.zeros(num_edges, x.dtype)
+    if s.creases.shape[0]:
+        out = out.at[s.crease_bars].set(fold_angles(x, s.creases, reference.creases))
+    if s.facets.shape[0]:
+        out = out.at[s.facet_bars].set(fold_angles(x, s.facets, reference.facets))
+    if s.free.shape[0]:
+        out = out.at[s.free_bars].set(fold_angles(x, s.free))
+    return out
+
+
+def kabsch_align(x: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``x`` (N, 3) moved by the proper rotation and translation that best fits ``reference``."""
+    x = np.asarray(x, np.float64)
+    reference = np.asarray(reference, np.float64)
+    cx, cr = x.mean(0), reference.mean(0)
+    h = (x - cx).T @ (reference - cr)
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    rot = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return (x - cx) @ rot.T + cr
+
+
+def shape_error(x: np.ndarray, reference: np.ndarray, diameter: float) -> float:
+    """RMS vertex distance after optimal rigid alignment (Kabsch), divided by ``diameter``."""
+    aligned = kabsch_align(x, reference)
+    return float(np.sqrt(np.mean(np.sum((aligned - reference) ** 2, axis=1))) / diameter)

@@ -1,0 +1,565 @@
+"""The crease pattern: flat vertices, edges with FOLD assignments and target fold angles, faces.
+
+Conventions (the FOLD 1.2 conventions, see README):
+
+* coordinates are in any length unit; the model is scale invariant;
+* fold angles are in **radians**, valley positive, mountain negative, flat 0, fully folded +-pi;
+* assignments are FOLD letters: ``B`` border, ``M`` mountain, ``V`` valley, ``F`` flat crease,
+  ``U`` unassigned, ``C`` cut, ``J`` join;
+* faces are polygons; they are re-oriented counterclockwise (seen from +z) and triangulated,
+  the added edges being facet creases (target 0).
+
+How each assignment enters the model:
+
+===========  ===============================================================
+``M``, ``V``  driven crease: torsion spring with ``crease`` stiffness, target given or -pi / +pi
+``F``, ``J``  facet crease: torsion spring with ``facet`` stiffness, target 0
+``U``         driven crease if it has a non-zero target, else a free hinge (no torsion spring)
+``B``         border: a bar only, exactly one face
+``C``         cut: the paper is split along it, each side becomes a border
+===========  ===============================================================
+
+Every edge, whatever its assignment, is a bar (an axial spring).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["PatternError", "CreasePattern", "Mesh", "ASSIGNMENTS"]
+
+ASSIGNMENTS = "BMVFUCJ"
+_DRIVEN, _FACET, _FREE, _BORDER = "driven", "facet", "free", "border"
+
+
+class PatternError(ValueError):
+    """A crease pattern (array, file or generator argument) is invalid.
+
+    The message names the offending vertex, edge or face and the problem, for example
+    ``"edge 7 (vertices 3, 9): names vertex 9, but there are only 9 vertices"``.
+    """
+
+
+def _edge_name(k: int, edge: Sequence[int]) -> str:
+    return f"edge {k} (vertices {int(edge[0])}, {int(edge[1])})"
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """The triangulated pattern the energy is built on (derived from a :class:`CreasePattern`).
+
+    Arrays (``V`` vertices, ``E`` edges, ``T`` triangles):
+
+    * ``vertices`` (V, 3) float64: rest (flat) positions; the pattern's own vertices first, then
+      copies made by cuts;
+    * ``edges`` (E, 2) int: the pattern's edges first (a cut edge stands for its first side),
+      then the second sides of cut edges, then triangulation edges;
+    * ``source_edge`` (E,) int: the pattern edge each edge comes from (-1 for triangulation edges);
+    * ``triangles`` (T, 3) int, counterclockwise; ``triangle_face`` (T,) their pattern face;
+    * ``role`` (E,) str: ``"driven"``, ``"facet"``, ``"free"`` or ``"border"``;
+    * ``target`` (E,) float64: target fold angle in radians (0 for facets, free hinges, borders);
+    * ``hinges`` (E, 4) int: for each edge ``(i, j, k, l)``, the edge ``i -> j``, ``k`` the third
+      vertex of the triangle on its left and ``l`` of the one on its right (-1 on borders).
+    """
+
+    vertices: np.ndarray
+    edges: np.ndarray
+    source_edge: np.ndarray
+    triangles: np.ndarray
+    triangle_face: np.ndarray
+    role: np.ndarray
+    target: np.ndarray
+    hinges: np.ndarray
+
+    @property
+    def num_vertices(self) -> int:
+        return int(self.vertices.shape[0])
+
+    @property
+    def num_edges(self) -> int:
+        return int(self.edges.shape[0])
+
+    def edges_with_role(self, role: str) -> np.ndarray:
+        """Indices of the edges with the given role."""
+        return np.flatnonzero(self.role == role)
+
+
+@dataclass(frozen=True, eq=False)
+class CreasePattern:
+    """A validated crease pattern.
+
+    Args:
+      vertices: (V, 2) or (V, 3) flat coordinates (z must be 0).
+      edges: (E, 2) vertex indices.
+      faces: polygons as sequences of vertex indices (any orientation).
+      assignments: one FOLD letter per edge (a string or a sequence); default ``B`` for edges
+        with one face, ``U`` for the others.
+      fold_angles: (E,) target fold angles in radians; default -pi for ``M``, +pi for ``V``,
+        0 otherwise.
+      name: a label used in reports.
+
+    Raises:
+      PatternError: naming the vertex, edge or face at fault.
+
+    Example:
+      >>> from origami_jax import CreasePattern
+      >>> cp = CreasePattern(
+      ...     vertices=[[0, 0], [1, 0], [1, 1], [0, 1]],
+      ...     edges=[[0, 1], [1, 2], [2, 3], [3, 0], [0, 2]],
+      ...     faces=[[0, 1, 2], [0, 2, 3]],
+      ...     assignments="BBBBV",
+      ...     fold_angles=[0, 0, 0, 0, 1.0],
+      ... )
+      >>> cp.num_vertices, cp.num_edges, cp.mesh.triangles.shape
+      (4, 5, (2, 3))
+    """
+
+    vertices: np.ndarray
+    edges: np.ndarray
+    faces: tuple[tuple[int, ...], ...]
+    assignments: np.ndarray = field(default=None)  # type: ignore[assignment]
+    fold_angles: np.ndarray = field(default=None)  # type: ignore[assignment]
+    name: str = "pattern"
+
+    def __post_init__(self) -> None:
+        vertices = _check_vertices(self.vertices)
+        edges = _check_edges(self.edges, len(vertices))
+        faces = _check_faces(self.faces, len(vertices))
+        edge_faces = _edge_faces(edges, faces)
+        assignments = _check_assignments(self.assignments, edge_faces)
+        fold_angles = _check_fold_angles(self.fold_angles, assignments)
+        _check_edge_geometry(vertices, edges)
+        _check_face_edges(edges, faces, edge_faces, assignments)
+        faces = tuple(_counterclockwise(vertices, f, k) for k, f in enumerate(faces))
+        for name, value in [
+            ("vertices", vertices),
+            ("edges", edges),
+            ("faces", faces),
+            ("assignments", assignments),
+            ("fold_angles", fold_angles),
+        ]:
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    # -- sizes -----------------------------------------------------------------------------
+    @property
+    def num_vertices(self) -> int:
+        return int(self.vertices.shape[0])
+
+    @property
+    def num_edges(self) -> int:
+        return int(self.edges.shape[0])
+
+    @property
+    def num_faces(self) -> int:
+        return len(self.faces)
+
+    @property
+    def diameter(self) -> float:
+        """Largest distance between two vertices (the flat sheet's diameter)."""
+        v = self.vertices
+        if len(v) > 2000:  # bounding-box diagonal: an upper bound within sqrt(2), cheap
+            return float(np.linalg.norm(v.max(0) - v.min(0)))
+        d = v[:, None, :] - v[None, :, :]
+        return float(np.sqrt((d * d).sum(-1).max()))
+
+    def with_fold_angles(self, fold_angles: Sequence[float] | np.ndarray) -> CreasePattern:
+        """A copy with other target fold angles (radians), validated again."""
+        return CreasePattern(
+            self.vertices, self.edges, self.faces, self.assignments, fold_angles, self.name
+        )
+
+    # -- the triangulated mesh the energy is built on ----------------------------------------
+    @functools.cached_property
+    def mesh(self) -> Mesh:
+        return _build_mesh(self)
+
+    def __repr__(self) -> str:
+        counts = {a: int((self.assignments == a).sum()) for a in ASSIGNMENTS}
+        hist = " ".join(f"{a}={n}" for a, n in counts.items() if n)
+        return (
+            f"CreasePattern({self.name!r}: {self.num_vertices} vertices, {self.num_edges} edges"
+            f" [{hist}], {self.num_faces} faces)"
+        )
+
+
+# ---------------------------------------------------------------------------------------------
+# validation
+
+
+def _as_array(value, dtype, what: str) -> np.ndarray:
+    try:
+        return np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError) as exc:
+        raise PatternError(f"{what}: cannot be read as an array of numbers ({exc})") from None
+
+
+def _check_vertices(vertices) -> np.ndarray:
+    v = _as_array(vertices, np.float64, "vertices")
+    if v.ndim != 2 or v.shape[1] not in (2, 3):
+        raise PatternError(f"vertices: expected shape (V, 2) or (V, 3), got {v.shape}")
+    if len(v) < 3:
+        raise PatternError(f"vertices: a pattern needs at least 3 vertices, got {len(v)}")
+    bad = ~np.isfinite(v).all(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise PatternError(f"vertex {k}: non-finite coordinate {v[k].tolist()}")
+    if v.shape[1] == 2:
+        v = np.concatenate([v, np.zeros((len(v), 1))], axis=1)
+    else:
+        scale = max(float(np.abs(v[:, :2]).max()), 1e-300)
+        off = np.abs(v[:, 2]) > 1e-12 * scale
+        if off.any():
+            k = int(np.flatnonzero(off)[0])
+            raise PatternError(
+                f"vertex {k}: z = {v[k, 2]:g}, but a crease pattern must be flat (z = 0)"
+            )
+        v = v.copy()
+        v[:, 2] = 0.0
+    return v
+
+
+def _check_edges(edges, num_vertices: int) -> np.ndarray:
+    e = np.asarray(edges)
+    if e.ndim != 2 or e.shape[1] != 2 or len(e) == 0:
+        raise PatternError(f"edges: expected shape (E, 2) with E > 0, got {e.shape}")
+    if not np.issubdtype(e.dtype, np.integer):
+        ef = _as_array(e, np.float64, "edges")
+        if not (np.isfinite(ef).all() and (ef == np.round(ef)).all()):
+            k = int(np.flatnonzero(~(np.isfinite(ef) & (ef == np.round(ef))).all(1))[0])
+            raise PatternError(f"edge {k}: vertex indices must be integers, got {ef[k].tolist()}")
+        e = ef.astype(np.int64)
+    e = e.astype(np.int64)
+    for k, (a, b) in enumerate(e):
+        for v in (a, b):
+            if v < 0 or v >= num_vertices:
+                raise PatternError(
+                    f"{_edge_name(k, (a, b))}: names vertex {v}, "
+                    f"but there are only {num_vertices} vertices"
+                )
+        if a == b:
+            raise PatternError(f"{_edge_name(k, (a, b))}: joins a vertex to itself")
+    key = np.sort(e, axis=1)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    dup = np.flatnonzero(first[inverse] != np.arange(len(e)))
+    if len(dup):
+        k = int(dup[0])
+        raise PatternError(f"{_edge_name(k, e[k])}: duplicates edge {int(first[inverse[k]])}")
+    return e
+
+
+def _check_faces(faces, num_vertices: int) -> tuple[tuple[int, ...], ...]:
+    if faces is None:
+        raise PatternError("faces: missing (a pattern needs its faces)")
+    out = []
+    for k, face in enumerate(faces):
+        try:
+            f = [int(v) for v in face]
+            if any(float(v) != int(v) for v in face):
+                raise ValueError
+        except (TypeError, ValueError):
+            raise PatternError(f"face {k}: vertex indices must be integers, got {face!r}") from None
+        if len(f) < 3:
+            raise PatternError(f"face {k}: has {len(f)} vertices, needs at least 3")
+        for v in f:
+            if v < 0 or v >= num_vertices:
+                raise PatternError(
+                    f"face {k}: names vertex {v}, but there are only {num_vertices} vertices"
+                )
+        if len(set(f)) != len(f):
+            raise PatternError(f"face {k}: repeats a vertex {f}")
+        out.append(tuple(f))
+    if not out:
+        raise PatternError("faces: the pattern has no faces")
+    return tuple(out)
+
+
+def _edge_faces(edges: np.ndarray, faces) -> list[list[int]]:
+    index = {(int(min(a, b)), int(max(a, b))): k for k, (a, b) in enumerate(edges)}
+    edge_faces: list[list[int]] = [[] for _ in range(len(edges))]
+    for fk, face in enumerate(faces):
+        n = len(face)
+        for s in range(n):
+            a, b = face[s], face[(s + 1) % n]
+            k = index.get((min(a, b), max(a, b)))
+            if k is None:
+                raise PatternError(f"face {fk}: side ({a}, {b}) is not an edge of the pattern")
+            edge_faces[k].append(fk)
+    return edge_faces
+
+
+def _check_assignments(assignments, edge_faces) -> np.ndarray:
+    n = len(edge_faces)
+    if assignments is None:
+        return np.array(["B" if len(f) == 1 else "U" for f in edge_faces])
+    letters = list(assignments)
+    if len(letters) != n:
+        raise PatternError(f"assignments: expected {n} letters (one per edge), got {len(letters)}")
+    out = np.empty(n, dtype="<U1")
+    for k, a in enumerate(letters):
+        a = str(a).upper()
+        if a not in ASSIGNMENTS:
+            raise PatternError(f"edge {k}: unknown assignment {a!r} (expected one of BMVFUCJ)")
+        out[k] = a
+    return out
+
+
+def _check_fold_angles(fold_angles, assignments: np.ndarray) -> np.ndarray:
+    n = len(assignments)
+    if fold_angles is None:
+        return np.where(assignments == "M", -np.pi, np.where(assignments == "V", np.pi, 0.0))
+    rho = _as_array(fold_angles, np.float64, "fold_angles")
+    if rho.shape != (n,):
+        raise PatternError(f"fold_angles: expected shape ({n},), got {rho.shape}")
+    for k in range(n):
+        r, a = rho[k], assignments[k]
+        if not np.isfinite(r):
+            raise PatternError(f"edge {k}: fold angle is {r}")
+        if abs(r) > np.pi * (1 + 1e-12):
+            raise PatternError(f"edge {k}: fold angle {r:.6g} rad is outside [-pi, pi]")
+        if (a == "M" and r > 0) or (a == "V" and r < 0):
+            raise PatternError(
+                f"edge {k}: assignment {a} but fold angle {r:.6g} rad "
+                "(mountains are negative, valleys positive)"
+            )
+        if a in "FJBC" and r != 0:
+            raise PatternError(f"edge {k}: assignment {a} takes no fold angle, got {r:.6g} rad")
+    return np.clip(rho, -np.pi, np.pi)
+
+
+def _check_edge_geometry(vertices: np.ndarray, edges: np.ndarray) -> None:
+    lengths = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+    scale = float(lengths.max())
+    short = np.flatnonzero(lengths <= 1e-12 * scale)
+    if len(short):
+        k = int(short[0])
+        raise PatternError(f"{_edge_name(k, edges[k])}: has zero length")
+
+
+def _check_face_edges(edges, faces, edge_faces, assignments) -> None:
+    for k, fs in enumerate(edge_faces):
+        a = assignments[k]
+        name = _edge_name(k, edges[k])
+        if len(fs) == 0:
+            raise PatternError(f"{name}: belongs to no face")
+        if len(fs) > 2:
+            raise PatternError(f"{name}: belongs to {len(fs)} faces {fs}, at most 2 allowed")
+        if a == "B" and len(fs) != 1:
+            raise PatternError(f"{name}: is a border (B) but lies between faces {fs}")
+        if a != "B" and len(fs) == 1:
+            raise PatternError(f"{name}: is assigned {a} but lies on the border (one face)")
+        if len(fs) == 2 and fs[0] == fs[1]:
+            raise PatternError(f"{name}: has face {fs[0]} on both sides")
+
+
+def _signed_area(points: np.ndarray) -> float:
+    x, y = points[:, 0], points[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def _counterclockwise(vertices, face, k) -> tuple[int, ...]:
+    pts = vertices[list(face), :2]
+    area = _signed_area(pts)
+    span = np.ptp(pts, axis=0).max()
+    if abs(area) <= 1e-12 * span * span:
+        raise PatternError(f"face {k}: has zero area (vertices {list(face)})")
+    return tuple(face) if area > 0 else tuple(reversed(face))
+
+
+# ---------------------------------------------------------------------------------------------
+# triangulation
+
+
+def _triangulate(points: np.ndarray, face: tuple[int, ...], k: int) -> list[tuple[int, int, int]]:
+    """Ear clipping of a simple counterclockwise polygon, taking the best-shaped ear first."""
+    idx = list(range(len(face)))
+    out: list[tuple[int, int, int]] = []
+    span = float(np.ptp(points, axis=0).max())
+    eps = 1e-12 * span * span
+    while len(idx) > 3:
+        best, best_q = -1, -np.inf
+        n = len(idx)
+        for s in range(n):
+            a, b, c = idx[s - 1], idx[s], idx[(s + 1) % n]
+            pa, pb, pc = points[a], points[b], points[c]
+            area2 = (pb[0] - pa[0]) * (pc[1] - pa[1]) - (pb[1] - pa[1]) * (pc[0] - pa[0])
+            if area2 <= eps:
+                continue
+            if any(
+                _in_triangle(points[v], pa, pb, pc, eps) for v in idx if v not in (a, b, c)
+            ):
+                continue
+            sides = sorted(
+                [np.linalg.norm(pb - pa), np.linalg.norm(pc - pb), np.linalg.norm(pa - pc)]
+            )
+            q = area2 / (sides[2] ** 2)  # larger is rounder
+            if q > best_q:
+                best, best_q = s, q
+        if best < 0:
+            raise PatternError(f"face {k}: is not a simple polygon (cannot be triangulated)")
+        out.append((idx[best - 1], idx[best], idx[(best + 1) % n]))
+        del idx[best]
+    out.append((idx[0], idx[1], idx[2]))
+    return [(face[a], face[b], face[c]) for a, b, c in out]
+
+
+def _in_triangle(p, a, b, c, eps) -> bool:
+    def cross(o, u, v):
+        return (u[0] - o[0]) * (v[1] - o[1]) - (u[1] - o[1]) * (v[0] - o[0])
+
+    return cross(a, b, p) >= -eps and cross(b, c, p) >= -eps and cross(c, a, p) >= -eps
+
+
+def find_root(parent, v):
+    """Root of ``v`` in a union-find forest (``parent`` a dict or array), compressing the path."""
+    while parent[v] != v:
+        parent[v] = parent[parent[v]]
+        v = parent[v]
+    return v
+
+
+def _split_cuts(vertices, triangles, cut_keys) -> tuple[np.ndarray, np.ndarray]:
+    """Give each fan of triangles around a vertex, separated by cut edges, its own vertex copy."""
+    if not cut_keys:
+        return vertices, triangles
+    out = triangles.copy()
+    around: dict[int, list[int]] = {}
+    for t, tri in enumerate(triangles):
+        for v in tri:
+            around.setdefault(int(v), []).append(t)
+    cut_vertices = sorted({v for key in cut_keys for v in key})
+    new_vertices = [vertices]
+    count = len(vertices)
+    for v in cut_vertices:
+        tris = around[v]
+        parent = {t: t for t in tris}
+        by_edge: dict[tuple[int, int], list[int]] = {}
+        for t in tris:
+            for w in triangles[t]:
+                if w != v:
+                    key = (min(v, int(w)), max(v, int(w)))
+                    by_edge.setdefault(key, []).append(t)
+        for key, ts in by_edge.items():
+            if key in cut_keys or len(ts) != 2:
+                continue
+            parent[find_root(parent, ts[0])] = find_root(parent, ts[1])
+        groups: dict[int, list[int]] = {}
+        for t in tris:
+            groups.setdefault(find_root(parent, t), []).append(t)
+        for group in list(groups.values())[1:]:
+            for t in group:
+                out[t][triangles[t] == v] = count
+            new_vertices.append(vertices[v][None])
+            count += 1
+    return np.concatenate(new_vertices), out
+
+
+def _build_mesh(cp: CreasePattern) -> Mesh:
+    vertices = cp.vertices
+    triangles: list[tuple[int, int, int]] = []
+    triangle_face: list[int] = []
+    for k, face in enumerate(cp.faces):
+        tris = (
+            [face]
+            if len(face) == 3
+            else _triangulate(vertices[list(face), :2], face, k)
+        )
+        triangles.extend(tris)
+        triangle_face.extend([k] * len(tris))
+    tri = np.array(triangles, dtype=np.int64)
+
+    pattern_key = {(int(min(a, b)), int(max(a, b))): k for k, (a, b) in enumerate(cp.edges)}
+    cut_keys = {key for key, k in pattern_key.items() if cp.assignments[k] == "C"}
+    # triangulation edges: sides of triangles that are not pattern edges
+    extra: dict[tuple[int, int], None] = {}  # insertion-ordered set
+    for a, b, c in tri:
+        for u, w in ((a, b), (b, c), (c, a)):
+            key = (int(min(u, w)), int(max(u, w)))
+            if key not in pattern_key:
+                extra[key] = None
+
+    split_vertices, split_tri = _split_cuts(vertices, tri, cut_keys)
+
+    # map each (directed) triangle side to its triangle, in the split mesh
+    side_owner: dict[tuple[int, int], int] = {}
+    for t, (a, b, c) in enumerate(split_tri):
+        for u, w in ((a, b), (b, c), (c, a)):
+            side_owner[(int(u), int(w))] = t
+    # each original undirected key -> list of split sides (u, w) with the triangle on the left
+    sides_of_key: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    for t in range(len(tri)):
+        for s in range(3):
+            u0, w0 = int(tri[t][s]), int(tri[t][(s + 1) % 3])
+            u1, w1 = int(split_tri[t][s]), int(split_tri[t][(s + 1) % 3])
+            key = (min(u0, w0), max(u0, w0))
+            sides_of_key.setdefault(key, []).append((u1, w1))
+
+    edges, source, role, target, hinges = [], [], [], [], []
+    second_sides = []
+
+    def add(u, w, src, rl, tg):
+        left = side_owner.get((u, w))
+        right = side_owner.get((w, u))
+        k_ = -1 if left is None else _third(split_tri[left], u, w)
+        l_ = -1 if right is None else _third(split_tri[right], u, w)
+        if rl != _BORDER and (k_ < 0 or l_ < 0):
+            rl, tg = _BORDER, 0.0
+        edges.append((u, w))
+        source.append(src)
+        role.append(rl)
+        target.append(tg)
+        hinges.append((u, w, k_, l_))
+
+    for k, (a, b) in enumerate(cp.edges):
+        key = (int(min(a, b)), int(max(a, b)))
+        asg, rho = cp.assignments[k], float(cp.fold_angles[k])
+        sides = sides_of_key[key]
+        if asg == "C":
+            u, w = sides[0]
+            add(u, w, k, _BORDER, 0.0)
+            if len(sides) > 1:
+                second_sides.append((sides[1], k))
+            continue
+        u, w = sides[0]
+        if asg in "MV" or (asg == "U" and rho != 0.0):
+            add(u, w, k, _DRIVEN, rho)
+        elif asg in "FJ":
+            add(u, w, k, _FACET, 0.0)
+        elif asg == "U":
+            add(u, w, k, _FREE, 0.0)
+        else:
+            add(u, w, k, _BORDER, 0.0)
+    for (u, w), k in second_sides:
+        add(u, w, k, _BORDER, 0.0)
+    for key in extra:
+        u, w = sides_of_key[key][0]
+        add(u, w, -1, _FACET, 0.0)
+
+    hinge_arr = np.array(hinges, dtype=np.int64)
+    mesh = Mesh(
+        vertices=split_vertices,
+        edges=hinge_arr[:, :2].copy(),
+        source_edge=np.array(source, dtype=np.int64),
+        triangles=split_tri,
+        triangle_face=np.array(triangle_face, dtype=np.int64),
+        role=np.array(role),
+        target=np.array(target, dtype=np.float64),
+        hinges=hinge_arr,
+    )
+    for arr in (mesh.vertices, mesh.edges, mesh.source_edge, mesh.triangles, mesh.triangle_face,
+                mesh.role, mesh.target, mesh.hinges):
+        arr.setflags(write=False)
+    return mesh
+
+
+def _third(tri, u, w) -> int:
+    for v in tri:
+        if v != u and v != w:
+            return int(v)
+    raise AssertionError("degenerate triangle")

@@ -1,0 +1,170 @@
+"""Energy and dihedral: zero where it must be, invariant, differentiable, continuous through pi."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.test_util import check_grads
+
+from origami_jax import CreasePattern
+from origami_jax.energy import (
+    HingeReference,
+    energy,
+    make_params,
+    make_structure,
+    update_reference,
+)
+from origami_jax.geometry import fold_angles
+
+SQUARE = dict(
+    vertices=[[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0], [0.5, 1], [0.5, 0.5]],
+    edges=[[0, 4], [4, 1], [1, 2], [2, 5], [5, 3], [3, 0], [4, 6], [6, 5], [0, 6], [6, 2]],
+    faces=[[0, 4, 6], [0, 6, 5, 3], [4, 1, 2, 6], [6, 2, 5]],
+)
+
+
+def square(assign="BBBBBBVVMF", angles=(0, 0, 0, 0, 0, 0, 1.0, 1.0, -2.0, 0)):
+    return CreasePattern(**SQUARE, assignments=assign, fold_angles=angles)
+
+
+def rotation(seed):
+    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
+def hinge(rho):
+    """Two unit triangles on the edge (0,0,0)-(0,1,0), folded to fold angle rho."""
+    t = rho / 2
+    return jnp.array(
+        [[0, 0, 0], [0, 1, 0], [-np.cos(t), 0.5, np.sin(t)], [np.cos(t), 0.5, np.sin(t)]]
+    ), jnp.array([[0, 1, 2, 3]])
+
+
+def test_zero_on_flat_sheet_with_flat_targets():
+    cp = square(angles=np.zeros(10), assign="BBBBBBUUUF")
+    structure, params = make_structure(cp.mesh), make_params(cp)
+    assert float(energy(jnp.asarray(cp.mesh.vertices), structure, params)) == 0.0
+    # ... and not zero once the targets are not flat
+    cp2 = square()
+    assert (
+        float(energy(jnp.asarray(cp2.mesh.vertices), make_structure(cp2.mesh), make_params(cp2)))
+        > 1e-4
+    )
+
+
+def test_invariant_under_rigid_motion():
+    cp = square()
+    structure, params = make_structure(cp.mesh), make_params(cp)
+    x = cp.mesh.vertices + 0.2 * np.random.default_rng(0).normal(size=cp.mesh.vertices.shape)
+    e0 = float(energy(jnp.asarray(x), structure, params))
+    for seed in range(3):
+        y = x @ rotation(seed).T + np.array([3.0, -1.0, 7.0]) * seed
+        assert float(energy(jnp.asarray(y), structure, params)) == pytest.approx(e0, rel=1e-12)
+    mirrored = x * np.array([1, 1, -1])  # a mirror turns valleys into mountains: not invariant
+    assert abs(float(energy(jnp.asarray(mirrored), structure, params)) - e0) > 1e-6
+
+
+@pytest.mark.parametrize("scale", [0.3, 1.0])
+def test_gradient_matches_central_differences(scale):
+    cp = square()
+    structure, params = make_structure(cp.mesh), make_params(cp)
+    rng = np.random.default_rng(1)
+    x = cp.mesh.vertices + scale * rng.normal(size=cp.mesh.vertices.shape)
+    f = jax.jit(lambda y: energy(y, structure, params))
+    g = np.asarray(jax.grad(f)(jnp.asarray(x)))
+    h = 1e-6
+    fd = np.zeros_like(x)
+    for idx in np.ndindex(x.shape):
+        d = np.zeros_like(x)
+        d[idx] = h
+        fd[idx] = (float(f(jnp.asarray(x + d))) - float(f(jnp.asarray(x - d)))) / (2 * h)
+    np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-6 * np.abs(g).max())
+
+
+def test_check_grads():
+    cp = square()
+    structure, params = make_structure(cp.mesh), make_params(cp)
+    x = cp.mesh.vertices + 0.3 * np.random.default_rng(2).normal(size=cp.mesh.vertices.shape)
+    check_grads(
+        lambda y: energy(y, structure, params), (jnp.asarray(x),), order=1, modes=["fwd", "rev"]
+    )
+
+
+@pytest.mark.parametrize("rho", [np.pi - 1e-7, -np.pi + 1e-7, np.pi])
+def test_gradient_near_full_fold(rho):
+    x, h = hinge(rho)
+    ref = jnp.array([np.pi * np.sign(rho) if rho != np.pi else np.pi])
+
+    @jax.jit
+    def f(y):
+        return jnp.sum((fold_angles(y, h, ref) - 0.5) ** 2)
+
+    g = jax.grad(f)(x)
+    assert np.isfinite(np.asarray(g)).all()
+    check_grads(f, (x,), order=1, modes=["fwd", "rev"], eps=1e-7)
+
+
+def test_gradient_finite_on_flat_sheet_and_collapsed_input():
+    cp = square()
+    structure, params = make_structure(cp.mesh), make_params(cp)
+    for x in [cp.mesh.vertices, np.zeros_like(cp.mesh.vertices)]:
+        g = jax.grad(energy)(jnp.asarray(x), structure, params)
+        assert np.isfinite(np.asarray(g)).all()
+
+
+def test_dihedral_matches_built_hinges():
+    angles = np.linspace(-np.pi, np.pi, 37)[1:]  # (-pi, pi]
+    for rho in angles:
+        x, h = hinge(rho)
+        got = float(fold_angles(x, h)[0])
+        assert got == pytest.approx(rho, abs=1e-12)
+        # the seed's dihedral theta = pi - rho and the valley sign: wings above the plane
+        assert (rho > 0) == (float(x[2, 2]) > 0) or abs(rho) < 1e-12
+
+
+def test_dihedral_continuous_through_pi():
+    reference = jnp.array([3.0])
+    for rho in np.linspace(3.0, 3.4, 41):  # passes through pi
+        x, h = hinge(rho)
+        got = float(fold_angles(x, h, reference)[0])
+        assert got == pytest.approx(rho, abs=1e-12)
+        reference = jnp.array([got])
+    # the principal value jumps there; the unwrapped one did not
+    x, h = hinge(3.3)
+    assert float(fold_angles(x, h)[0]) == pytest.approx(3.3 - 2 * np.pi, abs=1e-12)
+
+
+def test_reference_does_not_change_gradient():
+    cp = square()
+    structure, params = make_structure(cp.mesh), make_params(cp)
+    x = jnp.asarray(cp.mesh.vertices + 0.1)
+    ref = HingeReference(params.target, jnp.zeros(structure.facets.shape[0]))
+    ref2 = update_reference(x, structure, ref)
+    g1 = jax.grad(energy)(x, structure, params, ref)
+    g2 = jax.grad(energy)(x, structure, params, ref2)
+    np.testing.assert_allclose(np.asarray(g1), np.asarray(g2), rtol=1e-12, atol=1e-15)
+
+
+def test_terms_the_scene_lacks_are_not_built():
+    cp = CreasePattern(
+        vertices=[[0, 0], [1, 0], [1, 1], [0, 1]],
+        edges=[[0, 1], [1, 2], [2, 3], [3, 0], [0, 2]],
+        faces=[[0, 1, 2], [0, 2, 3]],
+        assignments="BBBBV",
+    )
+    structure = make_structure(cp.mesh)
+    assert structure.facets.shape == (0, 4) and structure.creases.shape == (1, 4)
+    jaxpr = str(jax.make_jaxpr(energy)(jnp.asarray(cp.mesh.vertices), structure, make_params(cp)))
+    assert jaxpr.count("atan2") == 1  # one torsion term: creases only
+
+
+def test_energy_differentiable_in_parameters():
+    cp = square()
+    structure, params = make_structure(cp.mesh), make_params(cp)
+    x = jnp.asarray(cp.mesh.vertices + 0.05)
+    g = jax.grad(lambda p: energy(x, structure, p))(params)
+    assert np.isfinite(np.asarray(g.target)).all() and float(jnp.abs(g.target).max()) > 0
+    batched = jax.vmap(lambda pc: energy(x, structure, params._replace(percent=pc)))(
+        jnp.linspace(0, 1, 5)
+    )
+    assert batched.shape == (5,) and len(set(np.round(np.asarray(batched), 12))) == 5
