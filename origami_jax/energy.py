@@ -4,11 +4,14 @@ Energy terms (lengths in the pattern's unit ``u``, angles in radians):
 
 * bar on every edge: ``axial / (2 l0) * (l - l0)**2``;
 * torsion on every driven crease: ``crease * l0 / 2 * (rho - percent * rho_target)**2``;
-* torsion on every facet crease (``F``, ``J`` and triangulation edges): ``facet * l0 / 2 * rho**2``.
+* torsion on every facet crease (``F``, ``J`` and triangulation edges): ``facet * l0 / 2 * rho**2``
+  (the two torsion kinds share one vectorised kernel, creases first).
 
 All three stiffnesses are forces (energy per unit length), so their ratios are dimensionless and
 a pattern's folded shape does not depend on its scale. Defaults follow the seed's order
-``axial > facet > crease``, about 20x apart: ``axial = 1``, ``facet = 0.05``, ``crease = 0.0025``.
+``axial > facet > crease``: ``axial = 1``, ``facet = 0.02``, ``crease = 0.001`` (facet 20x the
+crease, as in the seed; axial 1000x the crease, so that the sheet stays stiff in its plane: at
+400x a degree-4 vertex folded to 3 rad collapsed one of its thin triangles).
 
 A scene builds only the terms it has: a pattern without facet creases has no facet term, no
 array for it and no cost for it. Forces are ``-jax.grad`` of :func:`energy`; nothing is
@@ -27,6 +30,7 @@ Example:
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -43,13 +47,12 @@ __all__ = [
     "Stiffness",
     "Structure",
     "FoldParams",
-    "HingeReference",
+    "hinge_goals",
     "make_structure",
     "make_params",
     "energy",
     "build_energy",
     "initial_reference",
-    "update_reference",
 ]
 
 
@@ -63,27 +66,35 @@ class Stiffness(NamedTuple):
     """
 
     axial: float | Array = 1.0
-    facet: float | Array = 0.05
-    crease: float | Array = 0.0025
+    facet: float | Array = 0.02
+    crease: float | Array = 0.001
 
 
-@jax.tree_util.register_dataclass
+@functools.partial(
+    jax.tree_util.register_dataclass,
+    data_fields=["bars", "hinges", "hinge_bars", "free", "free_bars"],
+    meta_fields=["num_creases"],
+)
 @dataclass(frozen=True)
 class Structure:
     """The static structure of a scene: index arrays only (their shapes fix the compilation).
 
-    ``bars`` (E, 2); ``creases`` (Hc, 4) and ``facets`` (Hf, 4) hinges ``(i, j, k, l)``;
-    ``crease_bars`` (Hc,) and ``facet_bars`` (Hf,) the bar of each hinge; ``free`` (Hu, 4)
-    hinges without a spring and their ``free_bars``, kept only to report their fold angles.
+    ``bars`` (E, 2); ``hinges`` (H, 4) torsion hinges ``(i, j, k, l)``, the ``num_creases``
+    driven creases first, then the facet creases; ``hinge_bars`` (H,) the bar of each hinge;
+    ``free`` (Hu, 4) hinges without a spring and their ``free_bars``, kept only to report their
+    fold angles.
     """
 
     bars: Array
-    creases: Array
-    crease_bars: Array
-    facets: Array
-    facet_bars: Array
+    hinges: Array
+    hinge_bars: Array
     free: Array
     free_bars: Array
+    num_creases: int
+
+    @property
+    def num_facets(self) -> int:
+        return int(self.hinges.shape[0]) - self.num_creases
 
 
 class FoldParams(NamedTuple):
@@ -103,30 +114,17 @@ class FoldParams(NamedTuple):
     stiffness: Stiffness
 
 
-class HingeReference(NamedTuple):
-    """Per-hinge reference angles (radians) to unwrap fold angles against (see fold_angles)."""
-
-    creases: Array
-    facets: Array
-
-
 def make_structure(mesh: Mesh) -> Structure:
     """Index arrays of the scene from a triangulated :class:`Mesh`."""
-    def pick(role):
-        idx = mesh.edges_with_role(role)
-        return jnp.asarray(mesh.hinges[idx], jnp.int32), jnp.asarray(idx, jnp.int32)
-
-    creases, crease_bars = pick("driven")
-    facets, facet_bars = pick("facet")
-    free, free_bars = pick("free")
+    driven, facet, free = (mesh.edges_with_role(r) for r in ("driven", "facet", "free"))
+    torsion = np.concatenate([driven, facet])
     return Structure(
         bars=jnp.asarray(mesh.edges, jnp.int32),
-        creases=creases,
-        crease_bars=crease_bars,
-        facets=facets,
-        facet_bars=facet_bars,
-        free=free,
-        free_bars=free_bars,
+        hinges=jnp.asarray(mesh.hinges[torsion].reshape(-1, 4), jnp.int32),
+        hinge_bars=jnp.asarray(torsion, jnp.int32),
+        free=jnp.asarray(mesh.hinges[free].reshape(-1, 4), jnp.int32),
+        free_bars=jnp.asarray(free, jnp.int32),
+        num_creases=len(driven),
     )
 
 
@@ -153,57 +151,46 @@ def make_params(
     )
 
 
-def _torsion(x, hinges, length, stiffness, target, reference):
-    rho = fold_angles(x, hinges, reference)
-    return 0.5 * jnp.sum(stiffness * length * (rho - target) ** 2)
+def hinge_goals(structure: Structure, params: FoldParams) -> tuple[Array, Array]:
+    """(H,) goal angle ``percent * target`` (0 for facets) and (H,) torsion stiffness."""
+    nc, nf = structure.num_creases, structure.num_facets
+    s, dtype = params.stiffness, params.rest_length.dtype
+    goals, stiffness = [], []
+    if nc:
+        goals.append(params.percent * params.target)
+        stiffness.append(jnp.broadcast_to(s.crease, (nc,)))
+    if nf:
+        goals.append(jnp.zeros(nf, dtype))
+        stiffness.append(jnp.broadcast_to(s.facet, (nf,)))
+    return jnp.concatenate(goals), jnp.concatenate(stiffness)
 
 
 def energy(
-    x: Array, structure: Structure, params: FoldParams, reference: HingeReference | None = None
+    x: Array, structure: Structure, params: FoldParams, reference: Array | None = None
 ) -> Array:
     """Total energy of positions ``x`` (V, 3); a scalar in energy units (force x length).
 
-    ``reference`` unwraps each fold angle to the branch nearest it (see
-    :func:`origami_jax.geometry.fold_angles`); it changes no gradient. ``None`` uses
-    :func:`initial_reference` of the flat state, continuous on the whole way from flat to target.
+    ``reference`` (H,) unwraps each hinge's fold angle to the branch nearest it (see
+    :func:`origami_jax.geometry.fold_angles`); it changes no gradient. ``None`` uses the half-way
+    reference of :func:`initial_reference`, continuous on the whole way from flat to target.
     """
-    s = params.stiffness
     l0 = params.rest_length
     l = bar_lengths(x, structure.bars)
-    total = 0.5 * jnp.sum(s.axial / l0 * (l - l0) ** 2)
-    if reference is None:
-        reference = _midway(structure, params)
-    if structure.creases.shape[0]:
-        goal = params.percent * params.target
-        total += _torsion(
-            x, structure.creases, l0[structure.crease_bars], s.crease, goal, reference.creases
-        )
-    if structure.facets.shape[0]:
-        total += _torsion(
-            x, structure.facets, l0[structure.facet_bars], s.facet, 0.0, reference.facets
-        )
+    total = 0.5 * jnp.sum(params.stiffness.axial / l0 * (l - l0) ** 2)
+    if structure.hinges.shape[0]:
+        goal, stiffness = hinge_goals(structure, params)
+        if reference is None:
+            reference = 0.5 * goal
+        rho = fold_angles(x, structure.hinges, reference)
+        total += 0.5 * jnp.sum(stiffness * l0[structure.hinge_bars] * (rho - goal) ** 2)
     return total
 
 
-def _midway(structure: Structure, params: FoldParams) -> HingeReference:
-    """Half way to each crease's target: the branch cut lies opposite, far from flat and target."""
-    return HingeReference(
-        creases=0.5 * params.percent * params.target,
-        facets=jnp.zeros(structure.facets.shape[0], params.rest_length.dtype),
-    )
-
-
-def initial_reference(x: Array, structure: Structure, params: FoldParams) -> HingeReference:
-    """Unwrapped fold angles of ``x`` measured against the half-way reference."""
-    return update_reference(x, structure, _midway(structure, params))
-
-
-def update_reference(x: Array, structure: Structure, reference: HingeReference) -> HingeReference:
-    """Fold angles of ``x`` on the branches nearest ``reference`` (continuity through +-pi)."""
-    return HingeReference(
-        creases=fold_angles(x, structure.creases, reference.creases),
-        facets=fold_angles(x, structure.facets, reference.facets),
-    )
+def initial_reference(x: Array, structure: Structure, params: FoldParams) -> Array:
+    """(H,) unwrapped fold angles of ``x``, measured against half way to each goal: the branch
+    cut lies opposite, far from both flat and the target."""
+    goal, _ = hinge_goals(structure, params)
+    return fold_angles(x, structure.hinges, 0.5 * goal)
 
 
 def build_energy(
@@ -213,7 +200,7 @@ def build_energy(
     structure = make_structure(pattern.mesh)
     params = make_params(pattern, percent, stiffness)
 
-    def energy_fn(x: Array, params: FoldParams, reference: HingeReference | None = None) -> Array:
+    def energy_fn(x: Array, params: FoldParams, reference: Array | None = None) -> Array:
         return energy(jnp.asarray(x, params.rest_length.dtype), structure, params, reference)
 
     return energy_fn, params

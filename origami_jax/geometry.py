@@ -22,7 +22,15 @@ def safe_norm(v: Array, axis: int = -1) -> Array:
 
 def bar_lengths(x: Array, bars: Array) -> Array:
     """(E,) current lengths of the bars."""
-    return safe_norm(x[bars[:, 1]] - x[bars[:, 0]])
+    p = x[bars]  # one gather: (E, 2, 3)
+    return safe_norm(p[:, 1] - p[:, 0])
+
+
+def _cross(a: Array, b: Array) -> Array:
+    # written out: fewer XLA ops than jnp.cross, which matters for compile time
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def wrap_angle(a: Array) -> Array:
@@ -41,12 +49,13 @@ def fold_angles(x: Array, hinges: Array, reference: Array | None = None) -> Arra
     continuously through +-pi (unwrapping against a previous iterate); the gradient does not
     depend on the reference.
     """
-    i, j, k, l = hinges[:, 0], hinges[:, 1], hinges[:, 2], hinges[:, 3]
-    e = x[j] - x[i]
+    p = x[hinges]  # one gather: (H, 4, 3)
+    xi = p[:, 0]
+    e = p[:, 1] - xi
     e_hat = e / jnp.maximum(safe_norm(e), jnp.finfo(x.dtype).tiny)[:, None]
-    n_left = jnp.cross(e_hat, x[k] - x[i])
-    n_right = jnp.cross(x[l] - x[i], e_hat)
-    sin_part = jnp.sum(jnp.cross(n_right, n_left) * e_hat, axis=-1)
+    n_left = _cross(e_hat, p[:, 2] - xi)
+    n_right = _cross(p[:, 3] - xi, e_hat)
+    sin_part = jnp.sum(_cross(n_right, n_left) * e_hat, axis=-1)
     cos_part = jnp.sum(n_left * n_right, axis=-1)
     if reference is not None:
         c, s = jnp.cos(reference), jnp.sin(reference)

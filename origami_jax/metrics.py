@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from origami_jax.energy import FoldParams, HingeReference, Structure, energy
+from origami_jax.energy import FoldParams, Structure, energy, hinge_goals
 from origami_jax.geometry import bar_lengths, fold_angles
 
 __all__ = ["position_metrics", "edge_fold_angles", "kabsch_align", "shape_error", "METRIC_NAMES"]
@@ -33,36 +33,31 @@ METRIC_NAMES = (
 
 
 def position_metrics(
-    x: Array, s: Structure, p: FoldParams, reference: HingeReference
+    x: Array, s: Structure, p: FoldParams, reference: Array
 ) -> dict[str, Array]:
     """The metrics of metrics.md that depend on positions only (radians, dimensionless, energy)."""
     zero = jnp.zeros((), x.dtype)
-    out = {}
     strain = jnp.abs(bar_lengths(x, s.bars) / p.rest_length - 1.0)
-    out["strain_max"] = jnp.max(strain)
-    out["strain_mean"] = jnp.mean(strain)
-    if s.creases.shape[0]:
-        rho = fold_angles(x, s.creases, reference.creases)
-        err = jnp.abs(rho - p.percent * p.target)
-        out["fold_angle_error_max"] = jnp.max(err)
-        out["fold_angle_error_mean"] = jnp.mean(err)
-    else:
-        out["fold_angle_error_max"] = out["fold_angle_error_mean"] = zero
-    if s.facets.shape[0]:
-        out["facet_angle_error_max"] = jnp.max(jnp.abs(fold_angles(x, s.facets, reference.facets)))
-    else:
-        out["facet_angle_error_max"] = zero
+    out = {"strain_max": jnp.max(strain), "strain_mean": jnp.mean(strain)}
+    out["fold_angle_error_max"] = out["fold_angle_error_mean"] = zero
+    out["facet_angle_error_max"] = zero
+    if s.hinges.shape[0]:
+        goal, _ = hinge_goals(s, p)
+        err = jnp.abs(fold_angles(x, s.hinges, reference) - goal)
+        if s.num_creases:
+            out["fold_angle_error_max"] = jnp.max(err[: s.num_creases])
+            out["fold_angle_error_mean"] = jnp.mean(err[: s.num_creases])
+        if s.num_facets:
+            out["facet_angle_error_max"] = jnp.max(err[s.num_creases :])
     out["energy"] = energy(x, s, p, reference)
     return out
 
 
-def edge_fold_angles(x: Array, s: Structure, reference: HingeReference, num_edges: int) -> Array:
+def edge_fold_angles(x: Array, s: Structure, reference: Array, num_edges: int) -> Array:
     """(E,) fold angle of every mesh edge (radians; 0 on borders), unwrapped where tracked."""
     out = jnp.zeros(num_edges, x.dtype)
-    if s.creases.shape[0]:
-        out = out.at[s.crease_bars].set(fold_angles(x, s.creases, reference.creases))
-    if s.facets.shape[0]:
-        out = out.at[s.facet_bars].set(fold_angles(x, s.facets, reference.facets))
+    if s.hinges.shape[0]:
+        out = out.at[s.hinge_bars].set(fold_angles(x, s.hinges, reference))
     if s.free.shape[0]:
         out = out.at[s.free_bars].set(fold_angles(x, s.free))
     return out

@@ -225,7 +225,7 @@ def _check_vertices(vertices) -> np.ndarray:
 
 
 def _check_edges(edges, num_vertices: int) -> np.ndarray:
-    e = np.asarray(edges)
+    e = _as_array(edges, None, "edges")
     if e.ndim != 2 or e.shape[1] != 2 or len(e) == 0:
         raise PatternError(f"edges: expected shape (E, 2) with E > 0, got {e.shape}")
     if not np.issubdtype(e.dtype, np.integer):
@@ -257,6 +257,10 @@ def _check_edges(edges, num_vertices: int) -> np.ndarray:
 def _check_faces(faces, num_vertices: int) -> tuple[tuple[int, ...], ...]:
     if faces is None:
         raise PatternError("faces: missing (a pattern needs its faces)")
+    try:
+        faces = list(faces)
+    except TypeError:
+        raise PatternError(f"faces: expected a sequence of polygons, got {faces!r}") from None
     out = []
     for k, face in enumerate(faces):
         try:
@@ -298,13 +302,18 @@ def _check_assignments(assignments, edge_faces) -> np.ndarray:
     n = len(edge_faces)
     if assignments is None:
         return np.array(["B" if len(f) == 1 else "U" for f in edge_faces])
-    letters = list(assignments)
+    try:
+        letters = list(assignments)
+    except TypeError:
+        raise PatternError(
+            f"assignments: expected one letter per edge, got {assignments!r}"
+        ) from None
     if len(letters) != n:
         raise PatternError(f"assignments: expected {n} letters (one per edge), got {len(letters)}")
     out = np.empty(n, dtype="<U1")
     for k, a in enumerate(letters):
         a = str(a).upper()
-        if a not in ASSIGNMENTS:
+        if len(a) != 1 or a not in ASSIGNMENTS:
             raise PatternError(f"edge {k}: unknown assignment {a!r} (expected one of BMVFUCJ)")
         out[k] = a
     return out
@@ -356,6 +365,15 @@ def _check_face_edges(edges, faces, edge_faces, assignments) -> None:
             raise PatternError(f"{name}: is assigned {a} but lies on the border (one face)")
         if len(fs) == 2 and fs[0] == fs[1]:
             raise PatternError(f"{name}: has face {fs[0]} on both sides")
+    # a cut opens only at a vertex that can be split in two: on the border or on a second cut
+    on_border = {int(v) for k, fs in enumerate(edge_faces) if len(fs) == 1 for v in edges[k]}
+    cuts_at = np.bincount(edges[assignments == "C"].ravel(), minlength=int(edges.max()) + 1)
+    for k in np.flatnonzero(assignments == "C"):
+        if all(int(v) not in on_border and cuts_at[v] == 1 for v in edges[k]):
+            raise PatternError(
+                f"{_edge_name(k, edges[k])}: is a cut (C) that cannot open "
+                "(both its ends are inside the paper and meet no other cut)"
+            )
 
 
 def _signed_area(points: np.ndarray) -> float:
@@ -391,9 +409,7 @@ def _triangulate(points: np.ndarray, face: tuple[int, ...], k: int) -> list[tupl
             area2 = (pb[0] - pa[0]) * (pc[1] - pa[1]) - (pb[1] - pa[1]) * (pc[0] - pa[0])
             if area2 <= eps:
                 continue
-            if any(
-                _in_triangle(points[v], pa, pb, pc, eps) for v in idx if v not in (a, b, c)
-            ):
+            if any(_in_triangle(points[v], pa, pb, pc, eps) for v in idx if v not in (a, b, c)):
                 continue
             sides = sorted(
                 [np.linalg.norm(pb - pa), np.linalg.norm(pc - pb), np.linalg.norm(pa - pc)]
@@ -465,11 +481,7 @@ def _build_mesh(cp: CreasePattern) -> Mesh:
     triangles: list[tuple[int, int, int]] = []
     triangle_face: list[int] = []
     for k, face in enumerate(cp.faces):
-        tris = (
-            [face]
-            if len(face) == 3
-            else _triangulate(vertices[list(face), :2], face, k)
-        )
+        tris = [face] if len(face) == 3 else _triangulate(vertices[list(face), :2], face, k)
         triangles.extend(tris)
         triangle_face.extend([k] * len(tris))
     tri = np.array(triangles, dtype=np.int64)
@@ -552,8 +564,16 @@ def _build_mesh(cp: CreasePattern) -> Mesh:
         target=np.array(target, dtype=np.float64),
         hinges=hinge_arr,
     )
-    for arr in (mesh.vertices, mesh.edges, mesh.source_edge, mesh.triangles, mesh.triangle_face,
-                mesh.role, mesh.target, mesh.hinges):
+    for arr in (
+        mesh.vertices,
+        mesh.edges,
+        mesh.source_edge,
+        mesh.triangles,
+        mesh.triangle_face,
+        mesh.role,
+        mesh.target,
+        mesh.hinges,
+    ):
         arr.setflags(write=False)
     return mesh
 

@@ -18,8 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from origami_jax.energy import FoldParams, HingeReference, Structure, energy
-from origami_jax.pattern import Mesh, find_root
+from origami_jax.energy import FoldParams, Structure, energy
+from origami_jax.pattern import Mesh, PatternError, find_root
 
 __all__ = ["Status", "Problem", "Solver", "make_problem", "positions", "objective", "gauge"]
 
@@ -41,7 +41,9 @@ class Problem:
 
     ``start`` (V, 3) start positions; ``pinned`` (P,) vertices whose displacement is projected
     by ``projectors`` (P, 3, 3) to remove the 6 rigid-body motions of each piece; ``tol`` the
-    ``grad_norm_rel`` at which the solve has converged.
+    ``grad_norm_rel`` at which the solve has converged; ``max_step`` the largest displacement
+    of any vertex in one iteration (pattern units), so that no hinge turns by more than about
+    a quarter turn per step and the solve follows a folding path instead of jumping across one.
     """
 
     structure: Structure
@@ -50,6 +52,7 @@ class Problem:
     pinned: Array
     projectors: Array
     tol: Array
+    max_step: Array
 
 
 class Solver(Protocol):
@@ -70,13 +73,23 @@ def rigid_gauge(mesh: Mesh, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         parent[find_root(parent, b)] = root
         parent[find_root(parent, c)] = root
     piece_of_tri = np.array([find_root(parent, t[0]) for t in tris])
+    p = start[tris]
+    rest = mesh.vertices[tris]
+    area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    rest_area = np.linalg.norm(np.cross(rest[:, 1] - rest[:, 0], rest[:, 2] - rest[:, 0]), axis=1)
+    usable = area > 1e-6 * rest_area
     pinned, projectors = [], []
     for piece in np.unique(piece_of_tri):
         members = np.flatnonzero(piece_of_tri == piece)
-        centres = start[tris[members]].mean(axis=1)
-        centroid = centres.mean(axis=0)
-        t = members[np.argmin(np.linalg.norm(centres - centroid, axis=1))]
-        a, b, c = tris[t]
+        centres = p[members].mean(axis=1)
+        order = members[np.argsort(np.linalg.norm(centres - centres.mean(axis=0), axis=1))]
+        good = order[usable[order]]
+        if len(good) == 0:
+            raise PatternError(
+                f"start: every triangle of the piece holding vertex {tris[members[0], 0]} "
+                "is collapsed (zero area)"
+            )
+        a, b, c = tris[good[0]]
         d = start[b] - start[a]
         d /= np.linalg.norm(d)
         n = np.cross(start[b] - start[a], start[c] - start[a])
@@ -92,6 +105,7 @@ def make_problem(
     params: FoldParams,
     start: np.ndarray | None = None,
     tol: float = 1e-9,
+    max_step: float | None = None,
 ) -> Problem:
     dtype = params.rest_length.dtype
     start = mesh.vertices if start is None else np.asarray(start, np.float64)
@@ -103,7 +117,16 @@ def make_problem(
         pinned=jnp.asarray(pinned),
         projectors=jnp.asarray(projectors, dtype),
         tol=jnp.asarray(tol, dtype),
+        max_step=jnp.asarray(default_max_step(mesh) if max_step is None else max_step, dtype),
     )
+
+
+def default_max_step(mesh: Mesh) -> float:
+    """Half the median altitude of the triangles: a step turns a typical hinge < ~30 deg."""
+    p = mesh.vertices[mesh.triangles]
+    area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    longest = np.max(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2), axis=1)
+    return float(0.5 * np.median(area2 / longest))
 
 
 def gauge(problem: Problem, u: Array) -> Array:
@@ -116,5 +139,5 @@ def positions(problem: Problem, u: Array) -> Array:
     return problem.start + gauge(problem, u)
 
 
-def objective(u: Array, problem: Problem, reference: HingeReference) -> Array:
+def objective(u: Array, problem: Problem, reference: Array) -> Array:
     return energy(positions(problem, u), problem.structure, problem.params, reference)

@@ -16,22 +16,35 @@ import jax.numpy as jnp
 import optax
 from jax import Array
 
-from origami_jax.energy import HingeReference, initial_reference, update_reference
+from origami_jax.energy import initial_reference
+from origami_jax.geometry import fold_angles
 from origami_jax.solvers.base import Problem, Status, objective, positions
 
 __all__ = ["Lbfgs", "LbfgsState"]
 
 
+def limit_displacement(max_step) -> optax.GradientTransformation:
+    """Scale an update of (V, 3) displacements so that no vertex moves more than ``max_step``."""
+
+    def update(updates, state, params=None):
+        largest = jnp.max(jnp.sqrt(jnp.sum(updates * updates, axis=-1)))
+        return updates * jnp.minimum(1.0, max_step / jnp.maximum(largest, 1e-300)), state
+
+    return optax.GradientTransformation(lambda params: optax.EmptyState(), update)
+
+
 class LbfgsState(NamedTuple):
     u: Array  # (V, 3) displacement from problem.start, before the gauge
     opt_state: optax.OptState
-    reference: HingeReference
+    reference: Array  # (H,) unwrap reference of each torsion hinge, radians
     iteration: Array
     energy: Array
     grad_max: Array
     grad_max0: Array
     status: Array
-    stalls: Array  # consecutive steps without decrease
+    stalls: Array  # consecutive iterations whose line search found no step at all
+    best_grad: Array  # smallest grad_max so far
+    since_best: Array  # iterations since best_grad last improved
 
 
 @dataclass(frozen=True)
@@ -41,45 +54,50 @@ class Lbfgs:
     Attributes:
       memory_size: number of (step, gradient change) pairs kept.
       max_linesearch_steps: zoom line-search evaluations per iteration.
-      max_stalls: steps in a row without energy decrease before giving up (STALLED).
+      max_stalls: iterations in a row without any step before giving up (STALLED).
+      patience: iterations without a new smallest gradient before giving up (STALLED): the
+        gradient has reached the rounding floor of the dtype.
     """
 
     memory_size: int = 10
     max_linesearch_steps: int = 30
     max_stalls: int = 8
+    patience: int = 500
     name: str = "lbfgs"
 
-    def _optimizer(self) -> optax.GradientTransformationExtraArgs:
-        return optax.lbfgs(
-            memory_size=self.memory_size,
-            linesearch=optax.scale_by_zoom_linesearch(
-                max_linesearch_steps=self.max_linesearch_steps, initial_guess_strategy="one"
+    def _optimizer(self, max_step=1.0) -> optax.GradientTransformationExtraArgs:
+        return optax.chain(
+            optax.scale_by_lbfgs(memory_size=self.memory_size),
+            optax.scale(-1.0),
+            limit_displacement(max_step),
+            optax.scale_by_zoom_linesearch(
+                max_linesearch_steps=self.max_linesearch_steps,
+                max_learning_rate=1.0,
+                initial_guess_strategy="one",
             ),
         )
 
     def init(self, problem: Problem) -> LbfgsState:
+        """The start state. The energy and gradient at the start are first evaluated by the
+        first iteration (which sets ``grad_max0``), so no separate gradient is compiled here."""
         u = jnp.zeros_like(problem.start)
-        reference = initial_reference(problem.start, problem.structure, problem.params)
-        value, grad = jax.value_and_grad(objective)(u, problem, reference)
-        gmax = jnp.max(jnp.abs(grad))
-        ok = jnp.isfinite(value) & jnp.isfinite(gmax)
-        status = jnp.where(
-            ok, jnp.where(gmax == 0, Status.CONVERGED, Status.RUNNING), Status.NONFINITE
-        )
+        one = jnp.ones((), u.dtype)
         return LbfgsState(
             u=u,
             opt_state=self._optimizer().init(u),
-            reference=reference,
+            reference=initial_reference(problem.start, problem.structure, problem.params),
             iteration=jnp.zeros((), jnp.int32),
-            energy=value,
-            grad_max=gmax,
-            grad_max0=gmax,
-            status=status.astype(jnp.int32),
+            energy=jnp.full((), jnp.inf, u.dtype),
+            grad_max=one,
+            grad_max0=one,
+            status=jnp.asarray(Status.RUNNING, jnp.int32),
             stalls=jnp.zeros((), jnp.int32),
+            best_grad=jnp.full((), jnp.inf, u.dtype),
+            since_best=jnp.zeros((), jnp.int32),
         )
 
     def run(self, state: LbfgsState, problem: Problem, steps: Array) -> LbfgsState:
-        opt = self._optimizer()
+        opt = self._optimizer(problem.max_step)
         last = state.iteration + steps
 
         def cond(s: LbfgsState):
@@ -90,6 +108,9 @@ class Lbfgs:
                 return objective(u, problem, s.reference)
 
             value, grad = optax.value_and_grad_from_state(f)(s.u, state=s.opt_state)
+            first = s.iteration == 0
+            g_start = jnp.max(jnp.abs(grad))
+            grad_max0 = jnp.where(first, g_start, s.grad_max0)
             updates, opt_state = opt.update(
                 grad, s.opt_state, s.u, value=value, grad=grad, value_fn=f
             )
@@ -98,23 +119,30 @@ class Lbfgs:
             new_grad = optax.tree_utils.tree_get(opt_state, "grad")
             gmax = jnp.max(jnp.abs(new_grad))
             finite = jnp.isfinite(new_value) & jnp.isfinite(gmax)
-            stalls = jnp.where(new_value < value, 0, s.stalls + 1)
-            converged = gmax <= problem.tol * s.grad_max0
+            # a start that is already stationary (or not finite) takes no step
+            at_rest = first & (g_start == 0)
+            bad_start = first & ~(jnp.isfinite(value) & jnp.isfinite(g_start))
+            finite = finite & ~at_rest & ~bad_start
+            moved = jnp.any(updates != 0)
+            stalls = jnp.where(moved, 0, s.stalls + 1)
+            improved = gmax < s.best_grad
+            since_best = jnp.where(improved, 0, s.since_best + 1)
+            stalled = (stalls >= self.max_stalls) | (since_best >= self.patience)
+            converged = at_rest | (finite & (gmax <= problem.tol * grad_max0))
             status = jnp.where(
-                ~finite,
-                Status.NONFINITE,
+                converged,
+                Status.CONVERGED,
                 jnp.where(
-                    converged,
-                    Status.CONVERGED,
-                    jnp.where(stalls >= self.max_stalls, Status.STALLED, Status.RUNNING),
+                    ~finite,
+                    Status.NONFINITE,
+                    jnp.where(stalled, Status.STALLED, Status.RUNNING),
                 ),
             ).astype(jnp.int32)
             # a non-finite step is not taken: the state keeps the last finite iterate
             keep = lambda new, old: jnp.where(finite, new, old)  # noqa: E731
             u = keep(u, s.u)
-            reference = jax.tree.map(
-                keep,
-                update_reference(positions(problem, u), problem.structure, s.reference),
+            reference = keep(
+                fold_angles(positions(problem, u), problem.structure.hinges, s.reference),
                 s.reference,
             )
             opt_state = jax.tree.map(keep, opt_state, s.opt_state)
@@ -123,11 +151,13 @@ class Lbfgs:
                 opt_state=opt_state,
                 reference=reference,
                 iteration=s.iteration + 1,
-                energy=keep(new_value, s.energy),
-                grad_max=keep(gmax, s.grad_max),
-                grad_max0=s.grad_max0,
+                energy=keep(new_value, value),
+                grad_max=jnp.where(finite, gmax, jnp.where(first, g_start, s.grad_max)),
+                grad_max0=grad_max0,
                 status=status,
                 stalls=stalls,
+                best_grad=jnp.where(finite & improved, gmax, s.best_grad),
+                since_best=since_best,
             )
 
         return jax.lax.while_loop(cond, body, state)

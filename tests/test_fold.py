@@ -1,0 +1,178 @@
+"""fold(): exact rigid shapes from flat, the seed's scene, results, failures, float32.
+
+Compiled solvers are cached per shape, so the tests reuse a few small patterns.
+"""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from origami_jax import FoldResult, PatternError, Stiffness, fold, patterns
+from origami_jax.fold import default_tol
+from origami_jax.kinematics import rigid_fold
+from origami_jax.metrics import METRIC_NAMES
+from origami_jax.solvers import Status
+
+
+@pytest.fixture(scope="module")
+def miura():
+    return patterns.miura_ori(3, 3, sector_angle=np.radians(60), fold_angle=np.pi / 2)
+
+
+@pytest.mark.parametrize(
+    "gamma, rho", [(np.radians(60), np.pi / 2), (np.radians(45), 2.5), (np.radians(75), 0.8)]
+)
+def test_miura_folds_to_exact_rigid_shape(gamma, rho):
+    cp = patterns.miura_ori(3, 3, sector_angle=gamma, fold_angle=rho)
+    result = fold(cp, reference_positions=rigid_fold(cp))
+    assert result.converged, result.reason
+    assert result.shape_error <= 1e-8
+    assert result.fold_angle_error_max <= 1e-8
+    assert result.strain_max <= 1e-8
+
+
+@pytest.mark.parametrize(
+    "alpha, beta, rho, branch",
+    [(np.pi / 3, np.pi / 4, np.pi / 2, 1), (np.pi / 2.5, np.pi / 5, 2.0, 2),
+     (np.pi / 4, np.pi / 3, -1.2, 1), (2.0, 0.7, 3.0, 1), (2.5, 0.3, 3.1, 1)],
+)
+def test_degree4_vertex_folds_to_exact_rigid_shape(alpha, beta, rho, branch):
+    cp = patterns.degree4_vertex(alpha, beta, rho, branch=branch)
+    result = fold(cp, reference_positions=rigid_fold(cp))
+    assert result.converged, result.reason
+    assert result.shape_error <= 1e-8
+    assert result.fold_angle_error_max <= 1e-8
+
+
+def test_seed_scene_reaches_a_stationary_point(capsys):
+    cp = patterns.seed_waterbomb()
+    result = fold(cp, stiffness=patterns.SEED_WATERBOMB_STIFFNESS, tol=1e-10)
+    assert result.converged, result.reason
+    assert result.grad_norm_rel <= 1e-9
+    # the seed's start energy is reproduced by its stiffness; ours ends far below its 0.009519
+    assert result.history["energy"][0] == pytest.approx(patterns.SEED_WATERBOMB_ENERGY, rel=1e-9)
+    assert result.energy < 0.009519
+    with capsys.disabled():
+        print(f"\nseed scene: final energy {result.energy:.6f} (seed's simulator: 0.009519, "
+              f"start 0.009890), grad_norm_rel {result.grad_norm_rel:.1e}, "
+              f"{result.iterations} iterations, {result.wall_time * 1e3:.1f} ms")
+
+
+def test_result_fields_and_history(miura):
+    result = fold(miura)
+    assert isinstance(result, FoldResult)
+    mesh = miura.mesh
+    assert result.positions.shape == (mesh.num_vertices, 3)
+    assert result.fold_angles.shape == (mesh.num_edges,)
+    # the input's vertices first and in order: the pinned triangle keeps its flat position
+    moved = np.linalg.norm(result.positions - mesh.vertices, axis=1)
+    assert (moved < 1e-12).sum() >= 1 and moved.max() > 0.1
+    # simulated fold angles reach the targets on driven creases, 0 on borders
+    driven = mesh.edges_with_role("driven")
+    np.testing.assert_allclose(result.fold_angles[driven], mesh.target[driven], atol=1e-8)
+    assert np.all(result.fold_angles[mesh.edges_with_role("border")] == 0)
+    assert set(METRIC_NAMES) <= set(result.metrics)
+    h = result.history
+    assert h["wall_time"][0] == 0 and np.all(np.diff(h["wall_time"]) >= 0)
+    assert h["iteration"][-1] == result.iterations
+    assert h["fold_angle_error_max"][-1] < 1e-3 * h["fold_angle_error_max"][0]
+    assert result.compile_time >= 0 and result.wall_time > 0
+    text = result.summary()
+    for word in ("vertices", "edges", "solver", "iterations", "compile time", "run time",
+                 "max fold-angle error", "max strain"):
+        assert word in text
+
+
+def test_compiled_solver_is_reused(miura):
+    fold(miura)
+    again = fold(miura.with_fold_angles(miura.fold_angles * 0.5))
+    assert again.compile_time == 0.0 and again.converged
+
+
+def test_percent_scales_targets():
+    cp = patterns.single_crease(fold_angle=2.0)
+    k = cp.mesh.edges_with_role("driven")[0]
+    for percent in (0.25, 0.5, -0.5):
+        result = fold(cp, percent=percent)
+        assert result.converged
+        assert result.fold_angles[k] == pytest.approx(2.0 * percent, abs=1e-8)
+
+
+def test_iteration_limit_reports_not_converged(miura):
+    result = fold(miura, max_iter=5)
+    assert not result.converged and result.status == Status.MAX_ITER
+    assert result.iterations == 5 and "iteration limit" in result.reason
+    assert np.isfinite(result.positions).all()
+
+
+def test_full_fold_valley_does_not_pass_through_pi():
+    cp = patterns.single_crease(fold_angle=np.pi)
+    result = fold(cp)
+    assert result.converged
+    k = cp.mesh.edges_with_role("driven")[0]
+    assert result.fold_angles[k] == pytest.approx(np.pi, abs=1e-8)
+    # flat-folded: one wing lies on the other, every vertex on one side of the crease line
+    x = result.positions[:, 0]
+    assert (x <= 0.5 + 1e-8).all() or (x >= 0.5 - 1e-8).all()
+    # ... reached from the valley side: on the way the moving wing is above the sheet
+    partial = fold(cp, percent=0.9)
+    assert partial.positions[:, 2].max() > 0.1 and partial.positions[:, 2].min() > -1e-8
+
+
+def test_pre_folded_start_past_pi_is_brought_back():
+    cp = patterns.single_crease(fold_angle=np.pi)
+    start = rigid_fold(cp, np.where(cp.mesh.role == "driven", 3.4, 0.0))  # folded through
+    result = fold(cp, start=start)
+    k = cp.mesh.edges_with_role("driven")[0]
+    assert result.converged
+    assert result.fold_angles[k] == pytest.approx(np.pi, abs=1e-8)
+
+
+def test_float32():
+    cp = patterns.miura_ori(3, 3)
+    result = fold(cp, dtype=jnp.float32, reference_positions=rigid_fold(cp))
+    assert result.dtype == "float32"
+    assert result.converged, result.reason
+    assert result.fold_angle_error_max <= 1e-3
+    assert result.shape_error <= 1e-4
+    # pushed below its rounding floor, float32 stops by itself and says so
+    floor = fold(cp, dtype=jnp.float32, tol=1e-12, max_iter=20_000)
+    assert floor.status == Status.STALLED and floor.iterations < 20_000
+    assert "stalled" in floor.reason and np.isfinite(floor.positions).all()
+    assert default_tol(jnp.float32) > default_tol(jnp.float64)
+
+
+def test_stiffness_changes_non_rigid_result():
+    cp = patterns.seed_waterbomb()
+    soft = fold(cp, stiffness=Stiffness(axial=1.0, facet=0.02, crease=0.001))
+    stiff = fold(cp, stiffness=Stiffness(axial=100.0, facet=0.02, crease=0.001))
+    assert soft.converged and stiff.converged
+    assert stiff.strain_max < 0.2 * soft.strain_max
+
+
+def test_bad_arguments():
+    cp = patterns.single_crease()
+    with pytest.raises(ValueError, match="unknown solver 'newtonn'"):
+        fold(cp, solver="newtonn")
+    with pytest.raises(PatternError, match="start: vertex 2 is not finite"):
+        start = cp.mesh.vertices.copy()
+        start[2, 0] = np.nan
+        fold(cp, start=start)
+    with pytest.raises(PatternError, match="start: expected shape"):
+        fold(cp, start=np.zeros((2, 3)))
+    with pytest.raises(PatternError, match="percent"):
+        fold(cp, percent=float("nan"))
+    with pytest.raises(TypeError, match="CreasePattern"):
+        fold("not a pattern")
+
+
+def test_collapsed_start_is_refused_and_partial_collapse_recovers():
+    cp = patterns.single_crease()
+    with pytest.raises(PatternError, match="start: every triangle .* is collapsed"):
+        fold(cp, start=np.zeros_like(cp.mesh.vertices))
+    start = cp.mesh.vertices.copy()
+    wing = np.flatnonzero(start[:, 0] > 0.75)
+    start[wing, 0] = 0.5  # squash one wing onto the crease line
+    result = fold(cp, start=start)
+    assert np.isfinite(result.positions).all() and np.isfinite(result.fold_angles).all()
+    assert result.strain_max < 1e-6 or not result.converged
