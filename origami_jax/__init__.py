@@ -11,8 +11,10 @@ Importing the package changes no global JAX setting; enable float64 yourself wit
 ``jax.config.update("jax_enable_x64", True)`` when you need it.
 """
 
+from origami_jax import patterns
 from origami_jax.energy import FoldParams, Stiffness, build_energy, energy
 from origami_jax.fold import FoldResult, fold
+from origami_jax.io import from_fold_dict, load, save, to_fold_dict
 from origami_jax.pattern import ASSIGNMENTS, CreasePattern, Mesh, PatternError
 
 __all__ = [
@@ -26,10 +28,10 @@ __all__ = [
     "energy",
     "FoldResult",
     "fold",
+    "load",
+    "save",
+    "from_fold_dict",
+    "to_fold_dict",
+    "patterns",
 ]
 __version__ = "0.1.0"
-
-try:  # modules written alongside; absent ones simply are not exported yet
-    from origami_jax import patterns  # noqa: F401
-except ImportError:  # pragma: no cover
-    pass

@@ -24,8 +24,14 @@ from origami_jax.solvers.base import make_problem, positions
 
 __all__ = ["FoldResult", "fold", "default_tol"]
 
-HISTORY_FIELDS = ("iteration", "wall_time", "fold_angle_error_max", "strain_max", "energy",
-                  "grad_norm_rel")
+HISTORY_FIELDS = (
+    "iteration",
+    "wall_time",
+    "fold_angle_error_max",
+    "strain_max",
+    "energy",
+    "grad_norm_rel",
+)
 
 
 def default_tol(dtype) -> float:
@@ -89,8 +95,11 @@ class FoldResult:
             ("status", self.reason),
             ("compile time", f"{self.compile_time:.3f} s"),
             ("run time", f"{self.wall_time:.4f} s"),
-            ("max fold-angle error", f"{self.fold_angle_error_max:.3e} rad "
-                                     f"({np.degrees(self.fold_angle_error_max):.3e} deg)"),
+            (
+                "max fold-angle error",
+                f"{self.fold_angle_error_max:.3e} rad "
+                f"({np.degrees(self.fold_angle_error_max):.3e} deg)",
+            ),
             ("max strain", f"{self.strain_max:.3e}"),
             ("energy", f"{self.energy:.6g}"),
             ("grad_norm_rel", f"{self.grad_norm_rel:.3e}"),
@@ -279,8 +288,9 @@ def fold(
 
 
 def _sample(state, m, t: float) -> dict:
-    out = {k: float(m[k]) for k in ("fold_angle_error_max", "strain_max", "energy",
-                                     "grad_norm_rel")}
+    out = {
+        k: float(m[k]) for k in ("fold_angle_error_max", "strain_max", "energy", "grad_norm_rel")
+    }
     out["iteration"] = int(state.iteration)
     out["wall_time"] = t
     return out

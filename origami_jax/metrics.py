@@ -32,9 +32,7 @@ METRIC_NAMES = (
 )
 
 
-def position_metrics(
-    x: Array, s: Structure, p: FoldParams, reference: Array
-) -> dict[str, Array]:
+def position_metrics(x: Array, s: Structure, p: FoldParams, reference: Array) -> dict[str, Array]:
     """The metrics of metrics.md that depend on positions only (radians, dimensionless, energy)."""
     zero = jnp.zeros((), x.dtype)
     strain = jnp.abs(bar_lengths(x, s.bars) / p.rest_length - 1.0)

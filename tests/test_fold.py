@@ -33,8 +33,13 @@ def test_miura_folds_to_exact_rigid_shape(gamma, rho):
 
 @pytest.mark.parametrize(
     "alpha, beta, rho, branch",
-    [(np.pi / 3, np.pi / 4, np.pi / 2, 1), (np.pi / 2.5, np.pi / 5, 2.0, 2),
-     (np.pi / 4, np.pi / 3, -1.2, 1), (2.0, 0.7, 3.0, 1), (2.5, 0.3, 3.1, 1)],
+    [
+        (np.pi / 3, np.pi / 4, np.pi / 2, 1),
+        (np.pi / 2.5, np.pi / 5, 2.0, 2),
+        (np.pi / 4, np.pi / 3, -1.2, 1),
+        (2.0, 0.7, 3.0, 1),
+        (2.5, 0.3, 3.1, 1),
+    ],
 )
 def test_degree4_vertex_folds_to_exact_rigid_shape(alpha, beta, rho, branch):
     cp = patterns.degree4_vertex(alpha, beta, rho, branch=branch)
@@ -53,9 +58,11 @@ def test_seed_scene_reaches_a_stationary_point(capsys):
     assert result.history["energy"][0] == pytest.approx(patterns.SEED_WATERBOMB_ENERGY, rel=1e-9)
     assert result.energy < 0.009519
     with capsys.disabled():
-        print(f"\nseed scene: final energy {result.energy:.6f} (seed's simulator: 0.009519, "
-              f"start 0.009890), grad_norm_rel {result.grad_norm_rel:.1e}, "
-              f"{result.iterations} iterations, {result.wall_time * 1e3:.1f} ms")
+        print(
+            f"\nseed scene: final energy {result.energy:.6f} (seed's simulator: 0.009519, "
+            f"start 0.009890), grad_norm_rel {result.grad_norm_rel:.1e}, "
+            f"{result.iterations} iterations, {result.wall_time * 1e3:.1f} ms"
+        )
 
 
 def test_result_fields_and_history(miura):
@@ -78,8 +85,16 @@ def test_result_fields_and_history(miura):
     assert h["fold_angle_error_max"][-1] < 1e-3 * h["fold_angle_error_max"][0]
     assert result.compile_time >= 0 and result.wall_time > 0
     text = result.summary()
-    for word in ("vertices", "edges", "solver", "iterations", "compile time", "run time",
-                 "max fold-angle error", "max strain"):
+    for word in (
+        "vertices",
+        "edges",
+        "solver",
+        "iterations",
+        "compile time",
+        "run time",
+        "max fold-angle error",
+        "max strain",
+    ):
         assert word in text
 
 

@@ -44,7 +44,8 @@ class LbfgsState(NamedTuple):
     status: Array
     stalls: Array  # consecutive iterations whose line search found no step at all
     best_grad: Array  # smallest grad_max so far
-    since_best: Array  # iterations since best_grad last improved
+    best_energy: Array  # smallest energy so far
+    since_best: Array  # iterations since best_grad or best_energy last improved
 
 
 @dataclass(frozen=True)
@@ -55,8 +56,8 @@ class Lbfgs:
       memory_size: number of (step, gradient change) pairs kept.
       max_linesearch_steps: zoom line-search evaluations per iteration.
       max_stalls: iterations in a row without any step before giving up (STALLED).
-      patience: iterations without a new smallest gradient before giving up (STALLED): the
-        gradient has reached the rounding floor of the dtype.
+      patience: iterations with neither a new lowest energy nor a new smallest gradient before
+        giving up (STALLED): both have reached the rounding floor of the dtype.
     """
 
     memory_size: int = 10
@@ -93,6 +94,7 @@ class Lbfgs:
             status=jnp.asarray(Status.RUNNING, jnp.int32),
             stalls=jnp.zeros((), jnp.int32),
             best_grad=jnp.full((), jnp.inf, u.dtype),
+            best_energy=jnp.full((), jnp.inf, u.dtype),
             since_best=jnp.zeros((), jnp.int32),
         )
 
@@ -125,7 +127,7 @@ class Lbfgs:
             finite = finite & ~at_rest & ~bad_start
             moved = jnp.any(updates != 0)
             stalls = jnp.where(moved, 0, s.stalls + 1)
-            improved = gmax < s.best_grad
+            improved = finite & ((gmax < s.best_grad) | (new_value < s.best_energy))
             since_best = jnp.where(improved, 0, s.since_best + 1)
             stalled = (stalls >= self.max_stalls) | (since_best >= self.patience)
             converged = at_rest | (finite & (gmax <= problem.tol * grad_max0))
@@ -156,7 +158,8 @@ class Lbfgs:
                 grad_max0=grad_max0,
                 status=status,
                 stalls=stalls,
-                best_grad=jnp.where(finite & improved, gmax, s.best_grad),
+                best_grad=jnp.where(finite, jnp.minimum(gmax, s.best_grad), s.best_grad),
+                best_energy=jnp.where(finite, jnp.minimum(new_value, s.best_energy), s.best_energy),
                 since_best=since_best,
             )
 

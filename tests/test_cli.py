@@ -1,0 +1,103 @@
+"""The command line: the table, the written file, one-line errors with exit code 2."""
+
+import io
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from origami_jax import io as oio
+from origami_jax.cli import main
+from origami_jax.progress import ProgressBar
+
+
+def test_fold_example_writes_result_and_prints_table(tmp_path, capsys):
+    out = tmp_path / "crease.fold"
+    code = main(["fold", "--example", "single_crease", "--out", str(out), "--quiet"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    for word in (
+        "vertices",
+        "edges",
+        "solver",
+        "iterations",
+        "compile time",
+        "run time",
+        "max fold-angle error",
+        "max strain",
+    ):
+        assert word in captured.out
+    assert out.stat().st_size > 0
+    pattern = oio.load(out)
+    assert pattern.num_vertices == 6
+    folded = __import__("json").loads(out.read_text())["file_frames"][0]
+    assert "foldedForm" in folded["frame_classes"]
+    assert np.ptp(np.array(folded["vertices_coords"])[:, 2]) > 0.3  # really folded
+
+
+def test_fold_file_input_and_mesh_output(tmp_path, capsys):
+    from origami_jax import patterns
+
+    src = tmp_path / "in.fold"
+    oio.save(src, patterns.single_crease(fold_angle=1.0))
+    out = tmp_path / "out.obj"
+    assert main(["fold", str(src), "--out", str(out), "--percent", "50", "--quiet"]) == 0
+    assert out.stat().st_size > 0
+    assert "single_crease" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["fold", "missing.fold"], "missing.fold"),
+        (["fold", "--example", "single_crease", "--solver", "nope"], "unknown solver"),
+        (["fold", "--example", "single_crease", "--out", "x.xyz"], ".xyz"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_code_2(argv, message, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and message in err and "\n" not in err
+
+
+def test_malformed_file_from_the_shell(tmp_path):
+    bad = tmp_path / "bad.fold"
+    bad.write_text('{"vertices_coords": [[0, 0], [1, "x"]]}')
+    proc = subprocess.run(
+        [sys.executable, "-m", "origami_jax", "fold", str(bad), "--out", str(tmp_path / "o.fold")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ")
+    assert not (tmp_path / "o.fold").exists()
+
+
+def test_progress_bar_waits_then_draws():
+    stream = io.StringIO()
+    bar = ProgressBar(100, delay=10.0, stream=stream)
+    bar.update(10)
+    assert stream.getvalue() == ""
+    bar = ProgressBar(100, delay=0.0, stream=stream)
+    bar.update(50, "err 1e-3")
+    bar.close()
+    text = stream.getvalue()
+    assert "50/100" in text and "#" * 12 in text and text.endswith("\n")
+    assert np.isfinite(bar.total)
+
+
+def test_import_changes_no_jax_flag():
+    code = "import jax, origami_jax; print(jax.config.jax_enable_x64)"
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={"PATH": "/usr/bin:/bin"},
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "False"
