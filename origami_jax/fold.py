@@ -24,6 +24,16 @@ from origami_jax.solvers.base import make_problem, positions
 
 __all__ = ["FoldResult", "fold", "default_tol"]
 
+SUMMARY_ROWS = (
+    "vertices",
+    "edges",
+    "solver",
+    "iterations",
+    "compile time",
+    "run time",
+    "max fold-angle error",
+    "max strain",
+)
 HISTORY_FIELDS = (
     "iteration",
     "wall_time",
