@@ -137,9 +137,9 @@ def markdown(rows: list[dict], machine: str) -> str:
     head += [f"to {t:g} (s)" for t in THRESHOLDS]
     head += ["final fold-angle error (rad)", "strain_max", "grad_norm_rel", "shape_error"]
     lines = [
-        f"Measured {time.strftime('%Y-%m-%d')} on {machine}; float64, tol {rows[0]['threshold_on']}"
-        " thresholds on fold_angle_error_max (rad), or on grad_norm_rel for the seed's scene"
-        " (not rigid-foldable).",
+        f"Measured {time.strftime('%Y-%m-%d')} on {machine}; float64. Columns 'to 1e-3' etc.:"
+        " wall time until fold_angle_error_max (rad) first fell to that value, or, for the"
+        " seed's scene (not rigid-foldable), grad_norm_rel.",
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),
