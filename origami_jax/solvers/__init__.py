@@ -1,9 +1,10 @@
 """Solvers of the folding problem, chosen by name in :func:`origami_jax.fold`."""
 
 from origami_jax.solvers.base import Problem, Solver, Status
+from origami_jax.solvers.dynamics import Dynamics, DynamicsState
 from origami_jax.solvers.lbfgs import Lbfgs, LbfgsState
 
-SOLVERS: dict[str, Solver] = {"lbfgs": Lbfgs()}
+SOLVERS: dict[str, Solver] = {"lbfgs": Lbfgs(), "dynamics": Dynamics()}
 
 
 def get_solver(name: str | Solver) -> Solver:
@@ -18,4 +19,14 @@ def get_solver(name: str | Solver) -> Solver:
         ) from None
 
 
-__all__ = ["SOLVERS", "get_solver", "Problem", "Solver", "Status", "Lbfgs", "LbfgsState"]
+__all__ = [
+    "SOLVERS",
+    "get_solver",
+    "Problem",
+    "Solver",
+    "Status",
+    "Lbfgs",
+    "LbfgsState",
+    "Dynamics",
+    "DynamicsState",
+]
