@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -21,7 +21,17 @@ from jax import Array
 from origami_jax.energy import FoldParams, Structure, energy
 from origami_jax.pattern import Mesh, PatternError, find_root
 
-__all__ = ["Status", "Problem", "Solver", "make_problem", "positions", "objective", "gauge"]
+__all__ = [
+    "Status",
+    "Problem",
+    "Progress",
+    "Solver",
+    "make_problem",
+    "next_status",
+    "positions",
+    "objective",
+    "gauge",
+]
 
 
 class Status(IntEnum):
@@ -53,6 +63,36 @@ class Problem:
     projectors: Array
     tol: Array
     max_step: Array
+
+
+class Progress(NamedTuple):
+    """Best energy and gradient seen so far, and iterations since either improved."""
+
+    best_grad: Array
+    best_energy: Array
+    since_best: Array
+
+    @staticmethod
+    def start(dtype) -> Progress:
+        inf = jnp.full((), jnp.inf, dtype)
+        return Progress(inf, inf, jnp.zeros((), jnp.int32))
+
+    def update(self, finite: Array, grad_max: Array, energy: Array) -> Progress:
+        improved = finite & ((grad_max < self.best_grad) | (energy < self.best_energy))
+        return Progress(
+            best_grad=jnp.where(finite, jnp.minimum(grad_max, self.best_grad), self.best_grad),
+            best_energy=jnp.where(finite, jnp.minimum(energy, self.best_energy), self.best_energy),
+            since_best=jnp.where(improved, 0, self.since_best + 1),
+        )
+
+
+def next_status(converged: Array, finite: Array, stalled: Array) -> Array:
+    """The status after an iteration: converged first, then non-finite, then stalled."""
+    return jnp.where(
+        converged,
+        Status.CONVERGED,
+        jnp.where(~finite, Status.NONFINITE, jnp.where(stalled, Status.STALLED, Status.RUNNING)),
+    ).astype(jnp.int32)
 
 
 class Solver(Protocol):

@@ -28,7 +28,14 @@ from jax import Array
 
 from origami_jax.energy import initial_reference
 from origami_jax.geometry import fold_angles
-from origami_jax.solvers.base import Problem, Status, objective, positions
+from origami_jax.solvers.base import (
+    Problem,
+    Progress,
+    Status,
+    next_status,
+    objective,
+    positions,
+)
 
 __all__ = ["Dynamics", "DynamicsState", "max_eigenvalue"]
 
@@ -46,9 +53,7 @@ class DynamicsState(NamedTuple):
     dt_stable: Array
     alpha: Array  # FIRE mixing
     since_uphill: Array  # FIRE: steps since the power last turned negative
-    best_grad: Array
-    best_energy: Array
-    since_best: Array
+    progress: Progress
 
 
 def max_eigenvalue(f, u: Array, iterations: int = 30) -> Array:
@@ -118,9 +123,7 @@ class Dynamics:
             dt_stable=dt,
             alpha=jnp.asarray(0.1, u.dtype),
             since_uphill=zero,
-            best_grad=gmax,
-            best_energy=value,
-            since_best=zero,
+            progress=Progress(gmax, value, zero),
         )
 
     def step(self, s: DynamicsState, problem: Problem) -> DynamicsState:
@@ -148,18 +151,9 @@ class Dynamics:
         u = s.u + dt * v
         gmax = jnp.max(jnp.abs(grad))
         finite = jnp.isfinite(value) & jnp.isfinite(gmax) & jnp.all(jnp.isfinite(u))
-        improved = finite & ((gmax < s.best_grad) | (value < s.best_energy))
-        since_best = jnp.where(improved, 0, s.since_best + 1)
+        progress = s.progress.update(finite, gmax, value)
         converged = finite & (gmax <= problem.tol * s.grad_max0)
-        status = jnp.where(
-            converged,
-            Status.CONVERGED,
-            jnp.where(
-                ~finite,
-                Status.NONFINITE,
-                jnp.where(since_best >= self.patience, Status.STALLED, Status.RUNNING),
-            ),
-        ).astype(jnp.int32)
+        status = next_status(converged, finite, progress.since_best >= self.patience)
         # on convergence or a non-finite value the state keeps the point the gradient was taken at
         take = finite & ~converged
         keep = lambda new, old: jnp.where(take, new, old)  # noqa: E731
@@ -180,9 +174,7 @@ class Dynamics:
             dt_stable=s.dt_stable,
             alpha=alpha,
             since_uphill=since_uphill,
-            best_grad=jnp.where(finite, jnp.minimum(gmax, s.best_grad), s.best_grad),
-            best_energy=jnp.where(finite, jnp.minimum(value, s.best_energy), s.best_energy),
-            since_best=since_best,
+            progress=progress,
         )
 
     def run(self, state: DynamicsState, problem: Problem, steps: Array) -> DynamicsState:

@@ -18,7 +18,14 @@ from jax import Array
 
 from origami_jax.energy import initial_reference
 from origami_jax.geometry import fold_angles
-from origami_jax.solvers.base import Problem, Status, objective, positions
+from origami_jax.solvers.base import (
+    Problem,
+    Progress,
+    Status,
+    next_status,
+    objective,
+    positions,
+)
 
 __all__ = ["Lbfgs", "LbfgsState"]
 
@@ -43,9 +50,7 @@ class LbfgsState(NamedTuple):
     grad_max0: Array
     status: Array
     stalls: Array  # consecutive iterations whose line search found no step at all
-    best_grad: Array  # smallest grad_max so far
-    best_energy: Array  # smallest energy so far
-    since_best: Array  # iterations since best_grad or best_energy last improved
+    progress: Progress
 
 
 @dataclass(frozen=True)
@@ -93,9 +98,7 @@ class Lbfgs:
             grad_max0=one,
             status=jnp.asarray(Status.RUNNING, jnp.int32),
             stalls=jnp.zeros((), jnp.int32),
-            best_grad=jnp.full((), jnp.inf, u.dtype),
-            best_energy=jnp.full((), jnp.inf, u.dtype),
-            since_best=jnp.zeros((), jnp.int32),
+            progress=Progress.start(u.dtype),
         )
 
     def run(self, state: LbfgsState, problem: Problem, steps: Array) -> LbfgsState:
@@ -127,19 +130,10 @@ class Lbfgs:
             finite = finite & ~at_rest & ~bad_start
             moved = jnp.any(updates != 0)
             stalls = jnp.where(moved, 0, s.stalls + 1)
-            improved = finite & ((gmax < s.best_grad) | (new_value < s.best_energy))
-            since_best = jnp.where(improved, 0, s.since_best + 1)
-            stalled = (stalls >= self.max_stalls) | (since_best >= self.patience)
+            progress = s.progress.update(finite, gmax, new_value)
+            stalled = (stalls >= self.max_stalls) | (progress.since_best >= self.patience)
             converged = at_rest | (finite & (gmax <= problem.tol * grad_max0))
-            status = jnp.where(
-                converged,
-                Status.CONVERGED,
-                jnp.where(
-                    ~finite,
-                    Status.NONFINITE,
-                    jnp.where(stalled, Status.STALLED, Status.RUNNING),
-                ),
-            ).astype(jnp.int32)
+            status = next_status(converged, finite, stalled)
             # a non-finite step is not taken: the state keeps the last finite iterate
             keep = lambda new, old: jnp.where(finite, new, old)  # noqa: E731
             u = keep(u, s.u)
@@ -158,9 +152,7 @@ class Lbfgs:
                 grad_max0=grad_max0,
                 status=status,
                 stalls=stalls,
-                best_grad=jnp.where(finite, jnp.minimum(gmax, s.best_grad), s.best_grad),
-                best_energy=jnp.where(finite, jnp.minimum(new_value, s.best_energy), s.best_energy),
-                since_best=since_best,
+                progress=progress,
             )
 
         return jax.lax.while_loop(cond, body, state)
