@@ -20,7 +20,7 @@ from origami_jax.metrics import METRIC_NAMES, edge_fold_angles, position_metrics
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
 from origami_jax.solvers import Solver, Status, get_solver
-from origami_jax.solvers.base import make_problem, positions
+from origami_jax.solvers.base import make_problem, positions, prepare
 
 __all__ = ["FoldResult", "fold", "default_tol"]
 
@@ -243,6 +243,7 @@ def fold(
         params = jax.tree.map(lambda a: jnp.asarray(a, dtype), params)
         percent = float(params.percent)
     problem = make_problem(mesh, make_structure(mesh), params, start, tol)
+    problem = prepare(solver_obj, problem, mesh)
 
     (init, advance), compile_time = _compiled(solver_obj, problem, mesh.num_edges)
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax import Array
 
-__all__ = ["safe_norm", "bar_lengths", "fold_angles", "wrap_angle"]
+__all__ = ["safe_norm", "bar_lengths", "fold_angles", "dihedral_angles", "wrap_angle"]
 
 
 def safe_norm(v: Array, axis: int = -1) -> Array:
@@ -49,10 +49,14 @@ def fold_angles(x: Array, hinges: Array, reference: Array | None = None) -> Arra
     continuously through +-pi (unwrapping against a previous iterate); the gradient does not
     depend on the reference.
     """
-    p = x[hinges]  # one gather: (H, 4, 3)
+    return dihedral_angles(x[hinges], reference)  # one gather: (H, 4, 3)
+
+
+def dihedral_angles(p: Array, reference: Array | None = None) -> Array:
+    """:func:`fold_angles` of hinges given by their gathered corners ``p`` (H, 4, 3)."""
     xi = p[:, 0]
     e = p[:, 1] - xi
-    e_hat = e / jnp.maximum(safe_norm(e), jnp.finfo(x.dtype).tiny)[:, None]
+    e_hat = e / jnp.maximum(safe_norm(e), jnp.finfo(p.dtype).tiny)[:, None]
     n_left = _cross(e_hat, p[:, 2] - xi)
     n_right = _cross(p[:, 3] - xi, e_hat)
     sin_part = jnp.sum(_cross(n_right, n_left) * e_hat, axis=-1)

@@ -3,8 +3,9 @@
 from origami_jax.solvers.base import Problem, Solver, Status
 from origami_jax.solvers.dynamics import Dynamics, DynamicsState
 from origami_jax.solvers.lbfgs import Lbfgs, LbfgsState
+from origami_jax.solvers.newton import Newton, NewtonState
 
-SOLVERS: dict[str, Solver] = {"lbfgs": Lbfgs(), "dynamics": Dynamics()}
+SOLVERS: dict[str, Solver] = {"lbfgs": Lbfgs(), "dynamics": Dynamics(), "newton": Newton()}
 
 
 def get_solver(name: str | Solver) -> Solver:
@@ -29,4 +30,6 @@ __all__ = [
     "LbfgsState",
     "Dynamics",
     "DynamicsState",
+    "Newton",
+    "NewtonState",
 ]

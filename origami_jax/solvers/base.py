@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -27,6 +27,7 @@ __all__ = [
     "Progress",
     "Solver",
     "make_problem",
+    "prepare",
     "next_status",
     "positions",
     "objective",
@@ -53,7 +54,9 @@ class Problem:
     by ``projectors`` (P, 3, 3) to remove the 6 rigid-body motions of each piece; ``tol`` the
     ``grad_norm_rel`` at which the solve has converged; ``max_step`` the largest displacement
     of any vertex in one iteration (pattern units), so that no hinge turns by more than about
-    a quarter turn per step and the solve follows a folding path instead of jumping across one.
+    a quarter turn per step and the solve follows a folding path instead of jumping across one;
+    ``hessian`` what a solver attaches in its ``prepare`` (Newton: the Hessian's sparsity layout),
+    ``None`` for solvers that need nothing.
     """
 
     structure: Structure
@@ -63,6 +66,7 @@ class Problem:
     projectors: Array
     tol: Array
     max_step: Array
+    hessian: Any = None
 
 
 class Progress(NamedTuple):
@@ -101,6 +105,12 @@ class Solver(Protocol):
     def init(self, problem: Problem): ...
 
     def run(self, state, problem: Problem, steps: Array): ...
+
+
+def prepare(solver, problem: Problem, mesh: Mesh) -> Problem:
+    """Let a solver attach host-built static data to the problem (before ``jit``)."""
+    hook = getattr(solver, "prepare", None)
+    return problem if hook is None else hook(problem, mesh)
 
 
 def rigid_gauge(mesh: Mesh, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

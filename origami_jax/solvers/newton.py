@@ -1,0 +1,459 @@
+"""Newton's method on the same energy, with the exact Hessian assembled from element Hessians.
+
+Each iteration assembles the Hessian of the energy from per-element blocks: bars (6 x 6, in
+closed form) and torsion hinges (12 x 12, ``jax.hessian`` of the atan2 dihedral, vmapped). Far
+from equilibrium the Hessian can be indefinite, so the method works with two matrices:
+
+* the **convex part** (always positive semi-definite): each bar's Hessian with its compressive
+  (negative) transverse term dropped, and each hinge's Gauss-Newton term
+  ``k l0 grad(rho) grad(rho)^T``, which drops ``k l0 (rho - goal) hess(rho)``;
+* the **exact Hessian**, tried once the previous iteration took the full, unlimited Newton step
+  (the quadratic region), and kept as long as it gives a descent step that the line search
+  accepts whole; otherwise the iteration falls back to the convex part.
+
+A Levenberg-Marquardt shift ``mu * diag(H)`` (``mu`` from ``mu_min``, grown 10x whenever no step
+is found) keeps the system non-singular on mechanisms and free hinges. Rigid motions are gauged
+out as in the other solvers (the pinned vertices' blocks are projected, their complement set to
+a stiffness-sized identity). The step is limited to ``max_step`` per vertex and backtracked
+(Armijo) on the energy.
+
+The linear system is solved dense (Cholesky, inside ``jit``; vmap-able) for small patterns and
+sparse for large ones: SuperLU from scipy (already a dependency of jax) on the matrix in a
+fill-reducing nested-dissection order of the flat pattern, called through ``jax.pure_callback``.
+
+Example:
+  >>> from origami_jax import fold, patterns
+  >>> r = fold(patterns.miura_ori(3, 3), solver="newton")
+  >>> bool(r.converged), r.iterations < 30
+  (True, True)
+"""
+
+from __future__ import annotations
+
+import functools
+import weakref
+from dataclasses import dataclass, replace
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from jax import Array
+
+from origami_jax.energy import Structure, hinge_goals, initial_reference
+from origami_jax.geometry import dihedral_angles, fold_angles
+from origami_jax.pattern import Mesh
+from origami_jax.solvers.base import (
+    Problem,
+    Progress,
+    Status,
+    next_status,
+    objective,
+    positions,
+)
+
+__all__ = ["Newton", "NewtonState", "HessianLayout", "hessian_layout", "element_hessians"]
+
+
+@functools.partial(
+    jax.tree_util.register_dataclass,
+    data_fields=["order", "slot", "diag_blocks", "indptr", "indices"],
+    meta_fields=[],
+)
+@dataclass(frozen=True)
+class HessianLayout:
+    """Where every element-Hessian entry goes in the assembled (3V x 3V) matrix.
+
+    ``order`` (3V,) position of each degree of freedom in the solved system (a fill-reducing
+    order for the sparse solve); ``slot`` (M,) the storage slot of each entry of the bar blocks
+    (E, 6, 6) then the hinge blocks (H, 12, 12), flattened; ``diag_blocks`` (V, 3, 3) the slots of
+    each vertex's diagonal block. Sparse: ``indptr``/``indices`` the symmetric CSR pattern in
+    that order and slots index its data. Dense: both empty and slots index the flat matrix.
+    """
+
+    order: Array
+    slot: Array
+    diag_blocks: Array
+    indptr: Array
+    indices: Array
+
+    @property
+    def sparse(self) -> bool:
+        return self.indptr.shape[0] > 0
+
+    @property
+    def size(self) -> int:
+        return int(self.order.shape[0])
+
+    @property
+    def storage(self) -> int:
+        return int(self.indices.shape[0]) if self.sparse else self.size**2
+
+
+def _element_dofs(elements: np.ndarray) -> np.ndarray:
+    """(n_el, 3 * k) degrees of freedom of elements given by k vertex indices each."""
+    return (elements[:, :, None] * 3 + np.arange(3)).reshape(len(elements), -1)
+
+
+def nested_dissection(xy: np.ndarray, adjacency: sp.csr_matrix, leaf: int = 64) -> np.ndarray:
+    """A fill-reducing vertex order: split the flat sheet at the median of its longer side, put
+    the vertices touching the other half (the separator) last, recurse on both halves."""
+    out: list[np.ndarray] = []
+
+    def visit(idx: np.ndarray) -> None:
+        if len(idx) <= leaf:
+            out.append(idx)
+            return
+        p = xy[idx]
+        axis = int(np.argmax(p.max(axis=0) - p.min(axis=0)))
+        below = p[:, axis] <= np.median(p[:, axis])
+        left, right = idx[below], idx[~below]
+        if len(left) == 0 or len(right) == 0:
+            out.append(idx)
+            return
+        touches = np.asarray(adjacency[left][:, right].sum(axis=1)).ravel() > 0
+        visit(left[~touches])
+        visit(right)
+        out.append(left[touches])
+
+    visit(np.arange(len(xy)))
+    return np.concatenate(out)
+
+
+_LAYOUTS: dict = {}
+
+
+def hessian_layout(mesh: Mesh, structure: Structure, sparse: bool) -> HessianLayout:
+    """The assembly layout of a mesh's Hessian (cached per mesh)."""
+    key = (id(mesh), sparse)
+    hit = _LAYOUTS.get(key)
+    if hit is not None and hit[0]() is mesh:
+        return hit[1]
+    bars = np.asarray(structure.bars)
+    hinges = np.asarray(structure.hinges)
+    v = mesh.num_vertices
+    n = 3 * v
+    blocks = [_element_dofs(bars)]
+    if len(hinges):
+        blocks.append(_element_dofs(hinges))
+    rows = np.concatenate([np.repeat(b, b.shape[1], axis=1).ravel() for b in blocks])
+    cols = np.concatenate([np.tile(b, (1, b.shape[1])).ravel() for b in blocks])
+    diag = np.arange(v)[:, None, None] * 3 + np.arange(3)
+    diag_r = np.broadcast_to(diag, (v, 3, 3)).ravel()
+    diag_c = np.broadcast_to(diag.transpose(0, 2, 1), (v, 3, 3)).ravel()
+    if sparse:
+        elements = [bars] + ([hinges] if len(hinges) else [])
+        vr = np.concatenate([np.repeat(e, e.shape[1], axis=1).ravel() for e in elements])
+        vc = np.concatenate([np.tile(e, (1, e.shape[1])).ravel() for e in elements])
+        adjacency = sp.csr_matrix((np.ones(len(vr)), (vr, vc)), shape=(v, v))
+        vertex_order = nested_dissection(mesh.vertices[:, :2], adjacency)
+        rank = np.empty(v, np.int64)
+        rank[vertex_order] = np.arange(v)
+        order = (rank[:, None] * 3 + np.arange(3)).ravel()
+    else:
+        order = np.arange(n)
+    keys = order[np.concatenate([rows, diag_r])] * n + order[np.concatenate([cols, diag_c])]
+    if sparse:
+        unique, slot = np.unique(keys, return_inverse=True)
+        indptr = np.searchsorted(unique // n, np.arange(n + 1)).astype(np.int32)
+        indices = (unique % n).astype(np.int32)
+    else:
+        slot, indptr, indices = keys, np.zeros(0, np.int32), np.zeros(0, np.int32)
+    m = len(rows)
+    layout = HessianLayout(
+        order=jnp.asarray(order, jnp.int32),
+        slot=jnp.asarray(slot[:m], jnp.int32),
+        diag_blocks=jnp.asarray(slot[m:].reshape(v, 3, 3), jnp.int32),
+        indptr=jnp.asarray(indptr),
+        indices=jnp.asarray(indices),
+    )
+    _LAYOUTS[key] = (weakref.ref(mesh), layout)
+    return layout
+
+
+def _hinge_angle_derivatives(p: Array, reference: Array) -> tuple[Array, Array, Array]:
+    """Fold angle, its gradient (H, 4, 3) and Hessian (H, 4, 3, 4, 3) for each hinge."""
+
+    def one(q, ref):
+        return dihedral_angles(q[None], ref[None])[0]
+
+    def grad_and_aux(q, ref):
+        return jax.grad(one)(q, ref), jax.value_and_grad(one)(q, ref)
+
+    hess, (rho, grad) = jax.vmap(jax.jacfwd(grad_and_aux, has_aux=True))(p, reference)
+    return rho, grad, hess
+
+
+def element_hessians(
+    x: Array, structure: Structure, params, reference: Array, exact: Array | bool
+) -> Array:
+    """(M,) entries of the bar blocks (E, 6, 6) then hinge blocks (H, 12, 12), flattened.
+
+    ``exact`` selects the exact Hessian; otherwise its convex part (compressive bar term and
+    the hinges' ``(rho - goal) hess(rho)`` term dropped), positive semi-definite.
+    """
+    dtype = x.dtype
+    p = x[structure.bars]
+    l0 = params.rest_length
+    d = p[:, 1] - p[:, 0]
+    length = jnp.sqrt(jnp.sum(d * d, axis=-1))
+    dh = d / jnp.maximum(length, jnp.finfo(dtype).tiny)[:, None]
+    transverse = 1.0 - l0 / jnp.maximum(length, jnp.finfo(dtype).tiny)
+    transverse = jnp.where(exact, transverse, jnp.maximum(transverse, 0.0))
+    k = params.stiffness.axial / l0
+    outer = dh[:, :, None] * dh[:, None, :]
+    a = k[:, None, None] * (outer + transverse[:, None, None] * (jnp.eye(3, dtype=dtype) - outer))
+    sign = jnp.array([[1.0, -1.0], [-1.0, 1.0]], dtype)
+    bar_blocks = sign[None, :, None, :, None] * a[:, None, :, None, :]  # (E, 2, 3, 2, 3)
+    parts = [bar_blocks.reshape(-1)]
+    if structure.hinges.shape[0]:
+        goal, stiffness = hinge_goals(structure, params)
+        rho, g, h = _hinge_angle_derivatives(x[structure.hinges], reference)
+        kl = stiffness * l0[structure.hinge_bars]
+        residual = jnp.where(exact, rho - goal, 0.0)
+        gg = g[:, :, :, None, None] * g[:, None, None, :, :]
+        hinge_blocks = kl[:, None, None, None, None] * (gg + residual[:, None, None, None, None] * h)
+        parts.append(hinge_blocks.reshape(-1))
+    return jnp.concatenate(parts)
+
+
+def _gauge_blocks(data: Array, structure: Structure, problem: Problem) -> Array:
+    """Project every element block onto the pinned vertices' allowed motions."""
+    v = problem.start.shape[0]
+    eye = jnp.eye(3, dtype=data.dtype)
+    proj = jnp.broadcast_to(eye, (v, 3, 3)).at[problem.pinned].set(problem.projectors)
+    out, start = [], 0
+    for elements in (structure.bars, structure.hinges):
+        num, k = elements.shape
+        if num == 0:
+            continue
+        size = num * (3 * k) ** 2
+        block = data[start : start + size].reshape(num, k, 3, k, 3)
+        pe = proj[elements]  # (num, k, 3, 3)
+        block = jnp.einsum("naij,najbk,nbkl->naibl", pe, block, pe)
+        out.append(block.reshape(-1))
+        start += size
+    return jnp.concatenate(out)
+
+
+def _host_sparse_solve(indptr, indices, data, rhs):
+    """SuperLU on the symmetric matrix, already in a fill-reducing order; never raises."""
+    n = rhs.shape[0]
+    try:
+        matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n)).tocsc()
+        lu = spla.splu(
+            matrix,
+            permc_spec="NATURAL",
+            diag_pivot_thresh=0.0,
+            options={"SymmetricMode": True},
+        )
+        x = lu.solve(np.asarray(rhs))
+        ok = bool(np.all(np.isfinite(x)))
+    except (RuntimeError, ValueError):
+        x, ok = np.zeros_like(rhs), False
+    return x.astype(rhs.dtype), np.asarray(ok)
+
+
+class NewtonState(NamedTuple):
+    u: Array  # (V, 3) displacement from problem.start, before the gauge
+    grad: Array  # (V, 3) gradient of the energy at u (gauged)
+    reference: Array  # (H,) unwrap reference of each torsion hinge, radians
+    iteration: Array
+    energy: Array
+    grad_max: Array
+    grad_max0: Array
+    status: Array
+    mu: Array  # Levenberg-Marquardt shift, relative to the diagonal
+    exact: Array  # try the exact Hessian in the next iteration
+    stalls: Array  # iterations in a row without an accepted step
+    progress: Progress
+
+
+@dataclass(frozen=True)
+class Newton:
+    """Newton's method with exact element Hessians (``solver="newton"``).
+
+    Attributes:
+      linear_solver: ``"auto"`` (dense up to ``dense_max`` vertices, else sparse), ``"dense"``
+        or ``"sparse"``.
+      dense_max: largest vertex count solved dense under ``"auto"``.
+      mu_min: smallest Levenberg-Marquardt shift, relative to the matrix diagonal.
+      max_linesearch_steps: halvings of the step before an iteration gives up.
+      max_stalls: iterations in a row without a step before giving up (STALLED).
+      patience: iterations with neither a new lowest energy nor a new smallest gradient before
+        giving up (STALLED).
+    """
+
+    linear_solver: str = "auto"
+    dense_max: int = 200
+    mu_min: float = 1e-10
+    max_linesearch_steps: int = 40
+    max_stalls: int = 12
+    patience: int = 30
+    name: str = "newton"
+
+    def __post_init__(self):
+        if self.linear_solver not in ("auto", "dense", "sparse"):
+            raise ValueError(
+                f"unknown linear solver {self.linear_solver!r} (auto, dense, sparse)"
+            )
+
+    def prepare(self, problem: Problem, mesh: Mesh) -> Problem:
+        """Attach the Hessian layout (host side, before ``jit``)."""
+        sparse = self.linear_solver == "sparse" or (
+            self.linear_solver == "auto" and mesh.num_vertices > self.dense_max
+        )
+        return replace(problem, hessian=hessian_layout(mesh, problem.structure, sparse))
+
+    def init(self, problem: Problem) -> NewtonState:
+        u = jnp.zeros_like(problem.start)
+        reference = initial_reference(problem.start, problem.structure, problem.params)
+        value, grad = jax.value_and_grad(objective)(u, problem, reference)
+        gmax = jnp.max(jnp.abs(grad))
+        ok = jnp.isfinite(value) & jnp.isfinite(gmax)
+        status = jnp.where(
+            ok, jnp.where(gmax == 0, Status.CONVERGED, Status.RUNNING), Status.NONFINITE
+        )
+        zero = jnp.zeros((), jnp.int32)
+        return NewtonState(
+            u=u,
+            grad=grad,
+            reference=reference,
+            iteration=zero,
+            energy=value,
+            grad_max=gmax,
+            grad_max0=gmax,
+            status=status.astype(jnp.int32),
+            mu=jnp.asarray(self.mu_min, u.dtype),
+            exact=jnp.zeros((), bool),
+            stalls=zero,
+            progress=Progress(gmax, value, zero),
+        )
+
+    def _direction(self, s: NewtonState, problem: Problem, exact: Array) -> tuple[Array, Array]:
+        """Solve ``(H + mu diag H) d = -g``; (V, 3) step and whether the solve succeeded."""
+        layout: HessianLayout = problem.hessian
+        structure = problem.structure
+        x = positions(problem, s.u)
+        data = element_hessians(x, structure, problem.params, s.reference, exact)
+        data = _gauge_blocks(data, structure, problem)
+        values = jax.ops.segment_sum(data, layout.slot, num_segments=layout.storage)
+        # the pinned directions: an identity of the bars' size, so the system stays well scaled
+        scale = jnp.mean(problem.params.stiffness.axial / problem.params.rest_length)
+        eye = jnp.eye(3, dtype=x.dtype)
+        values = values.at[layout.diag_blocks[problem.pinned]].add(
+            scale * (eye - problem.projectors)
+        )
+        diag = values[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]]
+        floor = jnp.finfo(x.dtype).eps * jnp.max(diag)
+        values = values.at[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]].add(
+            s.mu * diag + floor
+        )
+        rhs = jnp.zeros(layout.size, x.dtype).at[layout.order].set(-s.grad.reshape(-1))
+        if layout.sparse:
+            sol, ok = jax.pure_callback(
+                _host_sparse_solve,
+                (
+                    jax.ShapeDtypeStruct(rhs.shape, rhs.dtype),
+                    jax.ShapeDtypeStruct((), jnp.bool_),
+                ),
+                layout.indptr,
+                layout.indices,
+                values,
+                rhs,
+                vmap_method="sequential",
+            )
+        else:
+            n = layout.size
+            chol = jnp.linalg.cholesky(values.reshape(n, n))
+            sol = jax.scipy.linalg.cho_solve((chol, True), rhs)
+            ok = jnp.all(jnp.isfinite(sol))
+        step = sol[layout.order].reshape(s.u.shape)
+        return jnp.where(ok, step, 0.0), ok
+
+    def _attempt(self, s: NewtonState, problem: Problem, exact: Array):
+        """Direction, limited step and backtracking: (u, energy, accepted, full step taken)."""
+        step, ok = self._direction(s, problem, exact)
+        largest = jnp.max(jnp.sqrt(jnp.sum(step * step, axis=-1)))
+        limit = jnp.minimum(1.0, problem.max_step / jnp.maximum(largest, 1e-300))
+        step = step * limit
+        slope = jnp.vdot(s.grad, step)
+        ok = ok & (slope < 0)
+        eps = jnp.finfo(s.u.dtype).eps
+
+        def value_at(alpha):
+            return objective(s.u + alpha * step, problem, s.reference)
+
+        def sufficient(alpha, value):
+            bound = s.energy + 1e-4 * alpha * slope + 8 * eps * jnp.abs(s.energy)
+            return jnp.isfinite(value) & (value <= bound)
+
+        def cond(c):
+            alpha, value, k = c
+            return ok & ~sufficient(alpha, value) & (k < self.max_linesearch_steps)
+
+        def body(c):
+            alpha, _, k = c
+            alpha = 0.5 * alpha
+            return alpha, value_at(alpha), k + 1
+
+        one = jnp.ones((), s.u.dtype)
+        alpha, value, _ = jax.lax.while_loop(cond, body, (one, value_at(one), 0))
+        accepted = ok & sufficient(alpha, value)
+        full = accepted & (alpha == 1) & (limit == 1)
+        return s.u + alpha * step, value, accepted, full
+
+    def step(self, s: NewtonState, problem: Problem) -> NewtonState:
+        """One Newton iteration (pure)."""
+        tried = self._attempt(s, problem, s.exact)
+        u, value, accepted, full = jax.lax.cond(
+            s.exact & ~tried[2],
+            lambda: self._attempt(s, problem, jnp.zeros((), bool)),
+            lambda: tried,
+        )
+        used_exact = s.exact & tried[2]
+        new_value, grad = jax.value_and_grad(objective)(u, problem, s.reference)
+        gmax = jnp.max(jnp.abs(grad))
+        finite = accepted & jnp.isfinite(new_value) & jnp.isfinite(gmax)
+        take = finite
+        stalls = jnp.where(take, 0, s.stalls + 1)
+        progress = s.progress.update(take, gmax, new_value)
+        converged = take & (gmax <= problem.tol * s.grad_max0)
+        stalled = (stalls >= self.max_stalls) | (progress.since_best >= self.patience)
+        nonfinite = accepted & ~finite
+        status = next_status(converged, ~nonfinite, stalled)
+        keep = lambda new, old: jnp.where(take, new, old)  # noqa: E731
+        u = keep(u, s.u)
+        reference = keep(
+            fold_angles(positions(problem, u), problem.structure.hinges, s.reference),
+            s.reference,
+        )
+        mu = jnp.where(
+            take,
+            jnp.maximum(self.mu_min, 0.1 * s.mu),
+            jnp.minimum(10.0 * s.mu, 1e10),
+        ).astype(s.mu.dtype)
+        return NewtonState(
+            u=u,
+            grad=keep(grad, s.grad),
+            reference=reference,
+            iteration=s.iteration + 1,
+            energy=keep(new_value, s.energy),
+            grad_max=keep(gmax, s.grad_max),
+            grad_max0=s.grad_max0,
+            status=status,
+            mu=mu,
+            exact=take & (full | used_exact),
+            stalls=stalls,
+            progress=progress,
+        )
+
+    def run(self, state: NewtonState, problem: Problem, steps: Array) -> NewtonState:
+        last = state.iteration + steps
+
+        def cond(s):
+            return (s.status == Status.RUNNING) & (s.iteration < last)
+
+        return jax.lax.while_loop(cond, lambda s: self.step(s, problem), state)
