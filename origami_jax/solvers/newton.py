@@ -212,10 +212,11 @@ def element_hessians(
         goal, stiffness = hinge_goals(structure, params)
         rho, g, h = _hinge_angle_derivatives(x[structure.hinges], reference)
         kl = stiffness * l0[structure.hinge_bars]
-        residual = jnp.where(exact, rho - goal, 0.0)
         gg = g[:, :, :, None, None] * g[:, None, None, :, :]
-        hinge_blocks = kl[:, None, None, None, None] * (gg + residual[:, None, None, None, None] * h)
-        parts.append(hinge_blocks.reshape(-1))
+        r = (rho - goal)[:, None, None, None, None]
+        full = kl[:, None, None, None, None] * (gg + r * h)
+        full = jnp.where(exact, full, kl[:, None, None, None, None] * gg)
+        parts.append(full.reshape(-1))
     return jnp.concatenate(parts)
 
 
@@ -280,6 +281,8 @@ class Newton:
         or ``"sparse"``.
       dense_max: largest vertex count solved dense under ``"auto"``.
       mu_min: smallest Levenberg-Marquardt shift, relative to the matrix diagonal.
+      max_turn: largest relative displacement of the two ends of any bar in one step, over its
+        rest length (about the largest rotation of any piece of paper per step, radians).
       max_linesearch_steps: halvings of the step before an iteration gives up.
       max_stalls: iterations in a row without a step before giving up (STALLED).
       patience: iterations with neither a new lowest energy nor a new smallest gradient before
@@ -289,6 +292,7 @@ class Newton:
     linear_solver: str = "auto"
     dense_max: int = 200
     mu_min: float = 1e-10
+    max_turn: float = 0.5
     max_linesearch_steps: int = 40
     max_stalls: int = 12
     patience: int = 30
@@ -296,9 +300,7 @@ class Newton:
 
     def __post_init__(self):
         if self.linear_solver not in ("auto", "dense", "sparse"):
-            raise ValueError(
-                f"unknown linear solver {self.linear_solver!r} (auto, dense, sparse)"
-            )
+            raise ValueError(f"unknown linear solver {self.linear_solver!r} (auto, dense, sparse)")
 
     def prepare(self, problem: Problem, mesh: Mesh) -> Problem:
         """Attach the Hessian layout (host side, before ``jit``)."""
@@ -376,8 +378,13 @@ class Newton:
     def _attempt(self, s: NewtonState, problem: Problem, exact: Array):
         """Direction, limited step and backtracking: (u, energy, accepted, full step taken)."""
         step, ok = self._direction(s, problem, exact)
-        largest = jnp.max(jnp.sqrt(jnp.sum(step * step, axis=-1)))
-        limit = jnp.minimum(1.0, problem.max_step / jnp.maximum(largest, 1e-300))
+        # limit how far any bar turns or stretches in one step (relative displacement of its
+        # ends over its length): rigid motion of far-away paper costs nothing, and no hinge
+        # turns by enough to jump branches
+        bars = problem.structure.bars
+        rel = step[bars[:, 1]] - step[bars[:, 0]]
+        largest = jnp.max(jnp.sqrt(jnp.sum(rel * rel, axis=-1)) / problem.params.rest_length)
+        limit = jnp.minimum(1.0, self.max_turn / jnp.maximum(largest, 1e-300))
         step = step * limit
         slope = jnp.vdot(s.grad, step)
         ok = ok & (slope < 0)

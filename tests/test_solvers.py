@@ -1,0 +1,117 @@
+"""The same correctness tests for every solver: exact rigid shapes, the seed's scene, full folds
+to +-pi, failures reported with a reason. Plus what is particular to Newton.
+
+Patterns are few and small so that each solver compiles once per shape.
+"""
+
+import jax
+import numpy as np
+import pytest
+
+from origami_jax import fold, patterns
+from origami_jax.kinematics import rigid_fold
+from origami_jax.solvers import SOLVERS, Newton, Status
+
+SOLVER_NAMES = sorted(SOLVERS)
+
+
+@pytest.fixture(scope="module")
+def lbfgs_seed():
+    return fold(patterns.seed_waterbomb(), stiffness=patterns.SEED_WATERBOMB_STIFFNESS)
+
+
+@pytest.mark.parametrize("solver", SOLVER_NAMES)
+@pytest.mark.parametrize(
+    "cp",
+    [
+        patterns.miura_ori(3, 3, sector_angle=np.radians(60), fold_angle=np.pi / 2),
+        patterns.degree4_vertex(np.pi / 3, np.pi / 4, np.pi / 2, branch=1),
+        patterns.degree4_vertex(np.pi / 2.5, np.pi / 5, 2.0, branch=2),
+        patterns.degree4_vertex(2.5, 0.3, 3.1, branch=1),
+    ],
+    ids=lambda cp: cp.name,
+)
+def test_exact_rigid_shape(solver, cp):
+    result = fold(cp, solver=solver, reference_positions=rigid_fold(cp))
+    assert result.converged, result.reason
+    assert result.solver == solver
+    assert result.shape_error <= 1e-8
+    assert result.fold_angle_error_max <= 1e-8
+    assert result.strain_max <= 1e-8
+
+
+@pytest.mark.parametrize("solver", SOLVER_NAMES)
+def test_seed_scene_same_stationary_point(solver, lbfgs_seed):
+    result = fold(
+        patterns.seed_waterbomb(), solver=solver, stiffness=patterns.SEED_WATERBOMB_STIFFNESS
+    )
+    assert result.converged and result.grad_norm_rel <= 1e-9
+    assert result.energy == pytest.approx(lbfgs_seed.energy, rel=1e-6)
+    assert result.energy < 0.009519  # where the seed's simulator was stopped
+
+
+@pytest.mark.parametrize("solver", SOLVER_NAMES)
+def test_full_fold_reaches_pi_without_passing_through(solver):
+    cp = patterns.single_crease(fold_angle=np.pi)
+    k = cp.mesh.edges_with_role("driven")[0]
+    result = fold(cp, solver=solver)
+    assert result.converged, result.reason
+    assert result.fold_angles[k] == pytest.approx(np.pi, abs=1e-8)
+    mountain = fold(cp, solver=solver, percent=-1.0)
+    assert mountain.fold_angles[k] == pytest.approx(-np.pi, abs=1e-8)
+
+
+@pytest.mark.parametrize("solver", SOLVER_NAMES)
+def test_iteration_limit_is_reported(solver):
+    cp = patterns.miura_ori(3, 3, sector_angle=np.radians(60), fold_angle=np.pi / 2)
+    result = fold(cp, solver=solver, max_iter=2)
+    assert not result.converged and result.status == Status.MAX_ITER
+    assert result.iterations == 2 and "iteration limit" in result.reason
+    assert np.isfinite(result.positions).all()
+
+
+def test_newton_is_quadratic_near_the_solution():
+    cp = patterns.miura_ori(3, 3, sector_angle=np.radians(60), fold_angle=np.pi / 2)
+    result = fold(cp, solver="newton")
+    g = result.history["grad_norm_rel"]
+    assert result.iterations < 40
+    # the last steps square the gradient, give or take: from < 1e-3 to <= 1e-10 in <= 3 steps
+    below = np.flatnonzero(g < 1e-3)
+    assert len(g) - below[0] <= 4
+
+
+def test_newton_sparse_and_dense_agree():
+    cp = patterns.miura_ori(3, 3, sector_angle=np.radians(60), fold_angle=np.pi / 2)
+    dense = fold(cp, solver=Newton(linear_solver="dense"))
+    sparse = fold(cp, solver=Newton(linear_solver="sparse"))
+    assert dense.converged and sparse.converged
+    np.testing.assert_allclose(sparse.positions, dense.positions, atol=1e-9)
+
+
+def test_newton_element_hessians_match_autodiff():
+    """The assembled exact Hessian equals jax.hessian of the energy (gauge off)."""
+    from origami_jax.energy import energy, initial_reference, make_params, make_structure
+    from origami_jax.solvers.newton import element_hessians, hessian_layout
+
+    cp = patterns.degree4_vertex(np.pi / 3, np.pi / 4, np.pi / 2)
+    mesh = cp.mesh
+    structure, params = make_structure(mesh), make_params(cp)
+    x = rigid_fold(cp, 0.6 * mesh.target) + 0.01 * np.sin(np.arange(mesh.num_vertices * 3)).reshape(
+        -1, 3
+    )
+    ref = initial_reference(x, structure, params)
+    layout = hessian_layout(mesh, structure, sparse=False)
+    n = layout.size
+    data = element_hessians(x, structure, params, ref, exact=True)
+    assembled = jax.ops.segment_sum(data, layout.slot, num_segments=n * n).reshape(n, n)
+    expected = jax.hessian(lambda y: energy(y.reshape(-1, 3), structure, params, ref))(x.ravel())
+    np.testing.assert_allclose(assembled, expected, atol=1e-10)
+    # the convex part is positive semi-definite
+    convex = element_hessians(x, structure, params, ref, exact=False)
+    matrix = jax.ops.segment_sum(convex, layout.slot, num_segments=n * n).reshape(n, n)
+    assert np.linalg.eigvalsh(np.asarray(matrix)).min() > -1e-12
+
+
+def test_newton_unknown_linear_solver():
+    with pytest.raises(ValueError, match="unknown linear solver"):
+        Newton(linear_solver="qr")
