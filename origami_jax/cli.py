@@ -37,7 +37,7 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument(
         "--out", help="output file: .fold, .obj, .ply, .stl or .vtu (default: <name>-folded.fold)"
     )
-    f.add_argument("--solver", default="lbfgs", help="solver name (default: lbfgs)")
+    f.add_argument("--solver", default="newton", help="newton (default), lbfgs or dynamics")
     f.add_argument("--percent", type=float, default=100.0, help="fold percent (default: 100)")
     f.add_argument("--tol", type=float, default=None, help="grad_norm_rel tolerance")
     f.add_argument("--max-iter", type=int, default=100_000, help="iteration limit")

@@ -179,7 +179,7 @@ def _reason(status: Status, m: dict, tol: float, iterations: int) -> str:
 def fold(
     pattern: CreasePattern,
     percent: float = 1.0,
-    solver: str | Solver = "lbfgs",
+    solver: str | Solver = "newton",
     tol: float | None = None,
     max_iter: int = 100_000,
     stiffness: Stiffness | dict | None = None,
@@ -194,7 +194,8 @@ def fold(
     Args:
       pattern: the crease pattern.
       percent: fold percent as a fraction; each crease is driven to ``percent * target``.
-      solver: a name from ``origami_jax.solvers.SOLVERS`` (``"lbfgs"``) or a solver object.
+      solver: ``"newton"`` (default: fewest iterations and the shortest run time on every
+        pattern measured), ``"lbfgs"``, ``"dynamics"``, or a solver object.
       tol: stop when ``grad_norm_rel`` (max-abs gradient over its start value) is below this;
         default :func:`default_tol` of the dtype.
       max_iter: iteration limit; reaching it gives ``converged=False``.

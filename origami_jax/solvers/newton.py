@@ -414,18 +414,15 @@ class Newton:
 
     def step(self, s: NewtonState, problem: Problem) -> NewtonState:
         """One Newton iteration (pure)."""
-        tried = self._attempt(s, problem, s.exact)
-        u, value, accepted, full = jax.lax.cond(
-            s.exact & ~tried[2],
-            lambda: self._attempt(s, problem, jnp.zeros((), bool)),
-            lambda: tried,
-        )
-        used_exact = s.exact & tried[2]
+        # one attempt per iteration (one linear solve compiled): an exact-Hessian attempt that
+        # fails costs an iteration and hands over to the convex part, without penalty
+        u, value, accepted, full = self._attempt(s, problem, s.exact)
+        retry = s.exact & ~accepted
         new_value, grad = jax.value_and_grad(objective)(u, problem, s.reference)
         gmax = jnp.max(jnp.abs(grad))
         finite = accepted & jnp.isfinite(new_value) & jnp.isfinite(gmax)
         take = finite
-        stalls = jnp.where(take, 0, s.stalls + 1)
+        stalls = jnp.where(take, 0, jnp.where(retry, s.stalls, s.stalls + 1))
         progress = s.progress.update(take, gmax, new_value)
         converged = take & (gmax <= problem.tol * s.grad_max0)
         stalled = (stalls >= self.max_stalls) | (progress.since_best >= self.patience)
@@ -440,7 +437,7 @@ class Newton:
         mu = jnp.where(
             take,
             jnp.maximum(self.mu_min, 0.1 * s.mu),
-            jnp.minimum(10.0 * s.mu, 1e10),
+            jnp.where(retry, s.mu, jnp.minimum(10.0 * s.mu, 1e10)),
         ).astype(s.mu.dtype)
         return NewtonState(
             u=u,
@@ -452,7 +449,7 @@ class Newton:
             grad_max0=s.grad_max0,
             status=status,
             mu=mu,
-            exact=take & (full | used_exact),
+            exact=take & (full | s.exact),
             stalls=stalls,
             progress=progress,
         )
