@@ -20,7 +20,7 @@ from origami_jax.metrics import METRIC_NAMES, edge_fold_angles, position_metrics
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
 from origami_jax.solvers import Solver, Status, get_solver
-from origami_jax.solvers.base import make_problem, positions, prepare
+from origami_jax.solvers.base import check_start, make_problem, positions, prepare
 
 __all__ = ["FoldResult", "fold", "default_tol"]
 
@@ -249,7 +249,9 @@ def fold(
     (init, advance), compile_time = _compiled(solver_obj, problem, mesh.num_edges)
 
     t0 = time.perf_counter()
-    state, m, x, angles = advance(init(problem), problem, jnp.int32(0))
+    state = init(problem)
+    check_start(solver_obj, state)
+    state, m, x, angles = advance(state, problem, jnp.int32(0))
     samples = [_sample(state, m, 0.0)]
     bar = ProgressBar(max_iter) if progress else None
     chunk, iterations = 1, 0

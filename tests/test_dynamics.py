@@ -9,13 +9,15 @@ import pytest
 
 from origami_jax import fold, patterns
 from origami_jax.energy import make_params, make_structure
-from origami_jax.solvers import Dynamics, Status
-from origami_jax.solvers.base import make_problem, objective
+from origami_jax.kinematics import rigid_fold
+from origami_jax.solvers import Dynamics, Status, origami_simulator
+from origami_jax.solvers.base import make_problem, objective, positions
+from origami_jax.solvers.dynamics import lumped_mass
 
 
 def test_viscous_scheme_converges():
     cp = patterns.single_crease(fold_angle=1.0)
-    result = fold(cp, solver=Dynamics(scheme="viscous", damping=0.95), max_iter=50_000)
+    result = fold(cp, solver=Dynamics(damping="viscous", velocity_scale=0.95), max_iter=50_000)
     assert result.converged, result.reason
     assert result.fold_angle_error_max <= 1e-8
 
@@ -47,6 +49,84 @@ def test_time_step_from_stiffest_mode_and_vmapped_runs():
     assert np.all(np.asarray(status) != Status.NONFINITE)
 
 
-def test_unknown_scheme():
-    with pytest.raises(ValueError, match="unknown dynamics scheme"):
-        Dynamics(scheme="leapfrog")
+@pytest.fixture(scope="module")
+def miura():
+    cp = patterns.miura_ori(3, 3, sector_angle=np.radians(60), fold_angle=np.pi / 2)
+    return cp, rigid_fold(cp)
+
+
+@pytest.mark.parametrize(
+    "solver",
+    [Dynamics(integrator="verlet"), Dynamics(mass="area"), Dynamics(ramp_steps=400)],
+    ids=["verlet", "area-mass", "ramp"],
+)
+def test_options_reach_the_exact_shape(miura, solver):
+    cp, exact = miura
+    result = fold(cp, solver=solver, reference_positions=exact)
+    assert result.converged, result.reason
+    assert result.shape_error <= 1e-8
+    assert result.iterations >= solver.ramp_steps
+
+
+@pytest.mark.parametrize(
+    "solver",
+    [Dynamics(damping="bar"), Dynamics(damping="bar", integrator="verlet"), origami_simulator()],
+    ids=["bar", "bar-verlet", "origami-simulator"],
+)
+def test_bar_damping_converges(solver):
+    cp = patterns.single_crease(fold_angle=1.0)
+    result = fold(cp, solver=solver, max_iter=200_000)
+    assert result.converged, result.reason
+    assert result.fold_angle_error_max <= 1e-8
+
+
+def test_lumped_mass_is_a_third_of_each_triangle():
+    cp = patterns.single_crease(width=2.0, height=3.0)
+    mass = lumped_mass(cp.mesh)
+    assert mass.sum() == pytest.approx(6.0)
+    assert mass.shape == (cp.mesh.num_vertices,) and (mass > 0).all()
+
+
+def test_origami_simulator_time_step():
+    cp = patterns.single_crease(width=2.0, height=1.0)
+    mesh = cp.mesh
+    params = make_params(cp, stiffness={"axial": 4.0})
+    problem = make_problem(mesh, make_structure(mesh), params)
+    state = jax.jit(origami_simulator().init_fn)(problem)
+    k = 4.0 / np.asarray(params.rest_length)
+    assert float(state.dt) == pytest.approx(0.9 / (2 * np.pi * np.sqrt(k.max())))
+
+
+def test_user_time_step_is_checked():
+    cp = patterns.single_crease(fold_angle=1.0)
+    mesh = cp.mesh
+    problem = make_problem(mesh, make_structure(mesh), make_params(cp))
+    limit = float(jax.jit(Dynamics().init_fn)(problem).dt_stable)
+    with pytest.raises(ValueError, match="exceeds the stability limit"):
+        fold(cp, solver=Dynamics(dt=1.5 * limit))
+    result = fold(cp, solver=Dynamics(dt=0.5 * limit))
+    assert result.converged, result.reason
+
+
+def test_momentum_removal():
+    cp = patterns.single_crease(fold_angle=1.0)
+    mesh = cp.mesh
+    problem = make_problem(mesh, make_structure(mesh), make_params(cp))
+    solver = Dynamics(damping="viscous", remove_momentum=True)
+    state = solver.init_fn(problem)
+    for _ in range(5):
+        state = solver.step_fn(state, problem)
+    x = np.asarray(positions(problem, state.u))
+    v = np.asarray(state.v)
+    assert np.abs(v).max() > 1e-6  # it moves
+    np.testing.assert_allclose(v.sum(axis=0), 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.cross(x - x.mean(axis=0), v).sum(axis=0), 0.0, atol=1e-12)
+
+
+def test_unknown_options():
+    with pytest.raises(ValueError, match="unknown dynamics damping"):
+        Dynamics(damping="leapfrog")
+    with pytest.raises(ValueError, match="unknown dynamics integrator"):
+        Dynamics(integrator="rk4")
+    with pytest.raises(ValueError, match="dt must be a positive"):
+        Dynamics(dt=-1.0)

@@ -1,7 +1,7 @@
 """Solvers of the folding problem, chosen by name in :func:`origami_jax.fold`."""
 
 from origami_jax.solvers.base import Problem, Solver, Status
-from origami_jax.solvers.dynamics import Dynamics, DynamicsState
+from origami_jax.solvers.dynamics import Dynamics, DynamicsState, origami_simulator
 from origami_jax.solvers.lbfgs import Lbfgs, LbfgsState
 from origami_jax.solvers.newton import Newton, NewtonState
 
@@ -30,6 +30,7 @@ __all__ = [
     "LbfgsState",
     "Dynamics",
     "DynamicsState",
+    "origami_simulator",
     "Newton",
     "NewtonState",
 ]

@@ -28,6 +28,7 @@ __all__ = [
     "Solver",
     "make_problem",
     "prepare",
+    "check_start",
     "next_status",
     "positions",
     "objective",
@@ -55,8 +56,8 @@ class Problem:
     ``grad_norm_rel`` at which the solve has converged; ``max_step`` the largest displacement
     of any vertex in one iteration (pattern units), so that no hinge turns by more than about
     a quarter turn per step and the solve follows a folding path instead of jumping across one;
-    ``hessian`` what a solver attaches in its ``prepare`` (Newton: the Hessian's sparsity layout),
-    ``None`` for solvers that need nothing.
+    ``aux`` what a solver attaches in its ``prepare`` (Newton: the Hessian's layout; dynamics:
+    the vertex masses), ``None`` for solvers that need nothing.
     """
 
     structure: Structure
@@ -66,7 +67,7 @@ class Problem:
     projectors: Array
     tol: Array
     max_step: Array
-    hessian: Any = None
+    aux: Any = None
 
 
 class Progress(NamedTuple):
@@ -105,6 +106,13 @@ class Solver(Protocol):
     def init(self, problem: Problem): ...
 
     def run(self, state, problem: Problem, steps: Array): ...
+
+
+def check_start(solver, state) -> None:
+    """Let a solver refuse its start state on the host (a user's unstable time step, say)."""
+    hook = getattr(solver, "check_start", None)
+    if hook is not None:
+        hook(state)
 
 
 def prepare(solver, problem: Problem, mesh: Mesh) -> Problem:

@@ -307,7 +307,7 @@ class Newton:
         sparse = self.linear_solver == "sparse" or (
             self.linear_solver == "auto" and mesh.num_vertices > self.dense_max
         )
-        return replace(problem, hessian=hessian_layout(mesh, problem.structure, sparse))
+        return replace(problem, aux=hessian_layout(mesh, problem.structure, sparse))
 
     def init(self, problem: Problem) -> NewtonState:
         u = jnp.zeros_like(problem.start)
@@ -336,7 +336,7 @@ class Newton:
 
     def _direction(self, s: NewtonState, problem: Problem, exact: Array) -> tuple[Array, Array]:
         """Solve ``(H + mu diag H) d = -g``; (V, 3) step and whether the solve succeeded."""
-        layout: HessianLayout = problem.hessian
+        layout: HessianLayout = problem.aux
         structure = problem.structure
         x = positions(problem, s.u)
         data = element_hessians(x, structure, problem.params, s.reference, exact)
