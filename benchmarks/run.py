@@ -3,10 +3,18 @@
     python benchmarks/run.py            # all cases, results in benchmarks/results/
     python benchmarks/run.py --quick    # small cases only (a smoke run)
 
-Every case is folded twice: the first run's compile time is reported, the second run's wall time
-(compile excluded). Times are for the machine the script runs on; compare solvers and cases by
-ratios measured in the same run. Plots need matplotlib (``pip install ".[bench]"``); without it
-the CSV and markdown are still written.
+Cases: the seed's scene, Miura-ori 10 x 10, 30 x 30 and 100 x 100, a Yoshimura, a Kresling, and
+every FOLD file under ../shared/patterns that loads (skipped when that folder is absent); the
+solvers Newton, L-BFGS and FIRE dynamics, plus Origami Simulator's scheme (semi-implicit Euler,
+bar damping, its time step) on the Miura-ori up to 30 x 30 for comparison. Each solve is
+capped at ``--max-time`` seconds.
+
+Compile time comes from a first call that compiles and runs no iteration; the wall time and
+the (wall time, error) series from a second call, compile excluded. Newton's series is taken
+from a third call that records every iteration (a host round trip each, about 0.5 ms, which
+its "to 1e-x" times include); its wall time is the second call's. Times are for the machine
+the script runs on; compare solvers and cases by the ratios measured in the same run. Plots
+need matplotlib (``pip install ".[bench]"``); without it the CSV and markdown are still written.
 """
 
 from __future__ import annotations
@@ -27,40 +35,56 @@ jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
-from origami_jax import fold, patterns  # noqa: E402
+from origami_jax import PatternError, fold, io, patterns  # noqa: E402
 from origami_jax.kinematics import rigid_fold  # noqa: E402
-from origami_jax.solvers import SOLVERS  # noqa: E402
+from origami_jax.solvers import origami_simulator  # noqa: E402
 
-THRESHOLDS = (1e-3, 1e-6, 1e-8)
+THRESHOLDS = (1e-3, 1e-6, 1e-8, 1e-9)
+SOLVERS = ("newton", "lbfgs", "dynamics")
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "patterns"
 
 
 def cases(quick: bool):
-    """(name, pattern, fold keyword arguments, exact reference shape or None)."""
+    """(name, pattern, fold keyword arguments, exact reference shape or None, solvers)."""
     seed = patterns.seed_waterbomb()
-    yield "seed_waterbomb", seed, {"stiffness": patterns.SEED_WATERBOMB_STIFFNESS}, None
-    sizes = (10,) if quick else (10, 30)
-    for n in sizes:
+    stiffness = {"stiffness": patterns.SEED_WATERBOMB_STIFFNESS}
+    yield "seed_waterbomb", seed, stiffness, None, SOLVERS
+    for n in (10,) if quick else (10, 30, 100):
         cp = patterns.miura_ori(n, n)
-        yield f"miura_{n}x{n}", cp, {}, rigid_fold(cp)
-    if not quick:
-        cp = patterns.kresling(n=6, stories=2)
-        yield "kresling_6x2", cp, {}, rigid_fold(cp)
-        cp = patterns.yoshimura(6, 4)
-        yield "yoshimura_6x4", cp, {}, rigid_fold(cp)
+        extra = ("origami_simulator",) if n <= 30 else ()
+        yield f"miura_{n}x{n}", cp, {}, rigid_fold(cp), SOLVERS + extra
+    if quick:
+        return
+    cp = patterns.kresling(n=6, stories=2)
+    yield "kresling_6x2", cp, {}, rigid_fold(cp), SOLVERS
+    cp = patterns.yoshimura(6, 4)
+    yield "yoshimura_6x4", cp, {}, rigid_fold(cp), SOLVERS
+    for path in sorted(SHARED.rglob("*.fold")) if SHARED.is_dir() else ():
+        try:
+            cp = io.load(path)
+        except PatternError as err:
+            print(f"skipped {path.relative_to(SHARED)}: {err}", file=sys.stderr)
+            continue
+        yield f"shared:{path.stem}", cp, {}, None, SOLVERS
 
 
-def time_to(history: dict, key: str, threshold: float) -> float:
-    """Wall time of the first sample at or below ``threshold`` (NaN if never)."""
+def solver_object(name: str):
+    return origami_simulator() if name == "origami_simulator" else name
+
+
+def first_at(history: dict, key: str, threshold: float, column: str) -> float:
+    """``column`` (wall_time or iteration) of the first sample at or below ``threshold``."""
     hit = np.flatnonzero(history[key] <= threshold)
-    return float(history["wall_time"][hit[0]]) if len(hit) else float("nan")
+    return float(history[column][hit[0]]) if len(hit) else float("nan")
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small cases only")
     parser.add_argument("--out", default=str(Path(__file__).parent / "results"))
-    parser.add_argument("--solvers", default=",".join(SOLVERS), help="comma-separated names")
+    parser.add_argument("--solvers", default=None, help="only these (comma-separated names)")
     parser.add_argument("--tol", type=float, default=1e-10, help="grad_norm_rel tolerance")
+    parser.add_argument("--max-time", type=float, default=120.0, help="seconds per solve")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -70,18 +94,27 @@ def main(argv=None) -> int:
         f"device {device.platform}: {device.device_kind}"
     )
     summary, history_rows, plots = [], [], {}
-    for name, cp, kwargs, reference in cases(args.quick):
-        for solver in args.solvers.split(","):
-            first = fold(cp, solver=solver, tol=args.tol, reference_positions=reference, **kwargs)
-            r = fold(cp, solver=solver, tol=args.tol, reference_positions=reference, **kwargs)
+    only = None if args.solvers is None else set(args.solvers.split(","))
+    for name, cp, kwargs, reference, solvers in cases(args.quick):
+        for solver in solvers:
+            if only is not None and solver not in only:
+                continue
+            common = dict(solver=solver_object(solver), tol=args.tol, **kwargs)
+            first = fold(cp, max_iter=0, **common)  # compiles, runs nothing
+            run = dict(reference_positions=reference, max_time=args.max_time, max_iter=10**9)
+            r = fold(cp, **run, **common)
+            wall_time = r.wall_time
+            if solver == "newton":  # resolve its few iterations: one sample each, timed apart
+                r = fold(cp, record_every=1, **run, **common)
             row = {
                 "case": name,
                 "solver": solver,
                 "vertices": cp.mesh.num_vertices,
                 "converged": r.converged,
+                "status": r.status.name,
                 "iterations": r.iterations,
                 "compile_time_s": first.compile_time,
-                "wall_time_s": r.wall_time,
+                "wall_time_s": wall_time,
                 "fold_angle_error_max": r.fold_angle_error_max,
                 "strain_max": r.strain_max,
                 "energy": r.energy,
@@ -90,7 +123,8 @@ def main(argv=None) -> int:
             }
             key = "grad_norm_rel" if reference is None else "fold_angle_error_max"
             for t in THRESHOLDS:
-                row[f"time_to_{t:g}_s"] = time_to(r.history, key, t)
+                row[f"time_to_{t:g}_s"] = first_at(r.history, key, t, "wall_time")
+                row[f"iterations_to_{t:g}"] = first_at(r.history, key, t, "iteration")
             row["threshold_on"] = key
             summary.append(row)
             for k in range(len(r.history["wall_time"])):
@@ -101,9 +135,9 @@ def main(argv=None) -> int:
                         **{f: float(r.history[f][k]) for f in r.history},
                     }
                 )
-            plots.setdefault(name, []).append((solver, r.history))
+            plots.setdefault(name.replace(":", "_"), []).append((solver, r.history))
             print(
-                f"{name:16s} {solver:8s} {r.iterations:6d} it  "
+                f"{name:16s} {solver:17s} {r.iterations:7d} it  "
                 f"compile {first.compile_time:6.2f} s  run {r.wall_time:8.4f} s  "
                 f"err {r.fold_angle_error_max:.2e}  "
                 f"{'converged' if r.converged else r.reason}",
@@ -135,30 +169,38 @@ def markdown(rows: list[dict], machine: str) -> str:
 
     head = ["case", "solver", "vertices", "iterations", "compile (s)", "run (s)"]
     head += [f"to {t:g} (s)" for t in THRESHOLDS]
-    head += ["final fold-angle error (rad)", "strain_max", "grad_norm_rel", "shape_error"]
+    head += ["iterations to 1e-06", "final fold-angle error (rad)", "strain_max"]
+    head += ["grad_norm_rel", "shape_error", "to 1e-06 vs newton"]
     lines = [
         f"Measured {time.strftime('%Y-%m-%d')} on {machine}; float64. Columns 'to 1e-3' etc.:"
-        " wall time until fold_angle_error_max (rad) first fell to that value, or, for the"
-        " seed's scene (not rigid-foldable), grad_norm_rel.",
+        " wall time (s, compile excluded) until fold_angle_error_max (rad) first fell to that"
+        " value, or, for patterns without an exact shape (the seed's scene, shared files),"
+        " grad_norm_rel; '-' never. 'vs newton': that time over Newton's on the same case.",
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),
     ]
+    newton = {r["case"]: r["time_to_1e-06_s"] for r in rows if r["solver"] == "newton"}
     for r in rows:
+        status = "" if r["converged"] else f" ({r['status'].lower().replace('_', ' ')})"
+        base = newton.get(r["case"], float("nan"))
         cells = [
             r["case"],
             r["solver"],
             str(r["vertices"]),
-            f"{r['iterations']}{'' if r['converged'] else ' (not converged)'}",
+            f"{r['iterations']}{status}",
             f"{r['compile_time_s']:.2f}",
-            f"{r['wall_time_s']:.4f}",
+            f"{r['wall_time_s']:.4g}",
         ]
         cells += [fmt(r[f"time_to_{t:g}_s"]) for t in THRESHOLDS]
+        iters = r["iterations_to_1e-06"]
         cells += [
+            "-" if iters != iters else f"{int(iters)}",
             fmt(r["fold_angle_error_max"]),
             fmt(r["strain_max"]),
             fmt(r["grad_norm_rel"]),
             fmt(r["shape_error"]),
+            fmt(r["time_to_1e-06_s"] / base) if base == base and base > 0 else "-",
         ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -85,6 +85,12 @@ class FoldResult:
     history: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
+    def through_pi(self) -> np.ndarray:
+        """Mesh edges whose crease folded through itself (unwrapped ``|angle| > pi``): the paper
+        passed through the paper there. Empty for a physical result."""
+        return np.flatnonzero(np.abs(self.fold_angles) > np.pi + 1e-9)
+
+    @property
     def metrics(self) -> dict[str, float]:
         """The metrics of metrics.md by name (shape_error only when a reference was given)."""
         out = {name: getattr(self, name) for name in METRIC_NAMES}
@@ -116,6 +122,10 @@ class FoldResult:
         ]
         if self.shape_error is not None:
             rows.append(("shape error", f"{self.shape_error:.3e}"))
+        through = self.through_pi
+        if len(through):
+            shown = ", ".join(str(k) for k in through[:8]) + (" ..." if len(through) > 8 else "")
+            rows.append(("folded through pi", f"{len(through)} edges: {shown}"))
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
@@ -168,6 +178,8 @@ def _reason(status: Status, m: dict, tol: float, iterations: int) -> str:
         Status.CONVERGED: f"converged: grad_norm_rel {g:.2e} <= tol {tol:.1e}",
         Status.MAX_ITER: f"iteration limit {iterations} reached: grad_norm_rel {g:.2e} > "
         f"tol {tol:.1e}",
+        Status.TIME_LIMIT: f"time limit reached after {iterations} iterations: grad_norm_rel "
+        f"{g:.2e} > tol {tol:.1e}",
         Status.NONFINITE: "stopped: non-finite energy or gradient; the last finite iterate "
         "is returned",
         Status.STALLED: f"stalled at grad_norm_rel {g:.2e} > tol {tol:.1e}: the line search "
@@ -188,6 +200,8 @@ def fold(
     reference_positions: np.ndarray | None = None,
     progress: bool = False,
     params: FoldParams | None = None,
+    max_time: float | None = None,
+    record_every: int | None = None,
 ) -> FoldResult:
     """Fold ``pattern`` to equilibrium from flat (or from ``start``).
 
@@ -206,6 +220,12 @@ def fold(
       reference_positions: an exact folded shape (V_mesh, 3) to report ``shape_error`` against.
       progress: show a progress bar on stderr once the solve has run for a second.
       params: full energy parameters (overrides ``percent`` and ``stiffness``).
+      max_time: stop after about this many seconds of solving (compile time excluded);
+        reaching it gives ``converged=False``. The solve checks it between compiled chunks of
+        about a tenth of a second (or one iteration, if longer).
+      record_every: record a ``history`` sample every this many iterations (default: chunks
+        that grow to about a tenth of a second each, which costs the solve nothing measurable;
+        ``1`` resolves each Newton iteration, at one host round trip per sample).
 
     Returns:
       A :class:`FoldResult`; it never holds NaN positions: a solve that meets a non-finite value
@@ -254,8 +274,14 @@ def fold(
     state, m, x, angles = advance(state, problem, jnp.int32(0))
     samples = [_sample(state, m, 0.0)]
     bar = ProgressBar(max_iter) if progress else None
-    chunk, iterations = 1, 0
+    if record_every is not None and int(record_every) < 1:
+        raise ValueError(f"record_every must be >= 1, got {record_every}")
+    chunk, iterations = record_every or 1, 0
+    out_of_time = False
     while int(state.status) == Status.RUNNING and iterations < max_iter:
+        if max_time is not None and time.perf_counter() - t0 >= max_time:
+            out_of_time = True
+            break
         steps = min(chunk, max_iter - iterations)
         t_chunk = time.perf_counter()
         state, m, x, angles = advance(state, problem, jnp.int32(steps))
@@ -268,6 +294,8 @@ def fold(
         # grow chunks geometrically, then keep each to about a tenth of a second
         per_step = (now - t_chunk) / max(steps, 1)
         chunk = max(1, min(2 * chunk, int(0.1 / max(per_step, 1e-9))))
+        if record_every is not None:
+            chunk = record_every
     x, angles = jax.device_get((x, angles))
     wall_time = time.perf_counter() - t0
     if bar is not None:
@@ -275,7 +303,7 @@ def fold(
 
     status = Status(int(state.status))
     if status == Status.RUNNING:
-        status = Status.MAX_ITER
+        status = Status.TIME_LIMIT if out_of_time else Status.MAX_ITER
     m = {k: float(v) for k, v in jax.device_get(m).items()}
     x = np.asarray(x, np.float64)
     shape_err = None

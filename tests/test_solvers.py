@@ -59,6 +59,7 @@ def test_full_fold_reaches_pi_without_passing_through(solver):
     assert result.fold_angles[k] == pytest.approx(np.pi, abs=1e-8)
     mountain = fold(cp, solver=solver, percent=-1.0)
     assert mountain.fold_angles[k] == pytest.approx(-np.pi, abs=1e-8)
+    assert len(result.through_pi) == 0 and len(mountain.through_pi) == 0
 
 
 @pytest.mark.parametrize("solver", SOLVER_NAMES)

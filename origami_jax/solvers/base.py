@@ -44,6 +44,7 @@ class Status(IntEnum):
     MAX_ITER = 2
     NONFINITE = 3
     STALLED = 4
+    TIME_LIMIT = 5  # set on the host, between compiled chunks
 
 
 @jax.tree_util.register_dataclass
