@@ -2,12 +2,14 @@
 
     python benchmarks/run.py            # all cases, results in benchmarks/results/
     python benchmarks/run.py --quick    # small cases only (a smoke run)
+    python benchmarks/run.py --part stiffness   # only the stiffness sweep
 
 Cases: the seed's scene, Miura-ori 10 x 10, 30 x 30 and 100 x 100, a Yoshimura, a Kresling, and
 every FOLD file under ../shared/patterns that loads (skipped when that folder is absent); the
 solvers Newton, L-BFGS and FIRE dynamics, plus Origami Simulator's scheme (semi-implicit Euler,
-bar damping, its time step) on the Miura-ori up to 30 x 30 for comparison. Each solve is
-capped at ``--max-time`` seconds.
+bar damping, its time step) on the Miura-ori up to 30 x 30 for comparison. A second part
+sweeps the axial : crease stiffness ratio from 1 to 1e8 on a 10 x 10 Miura-ori (files
+``stiffness_*``). Each solve is capped at ``--max-time`` seconds (120; 30 in the sweep).
 
 Compile time comes from a first call that compiles and runs no iteration; the wall time and
 the (wall time, error) series from a second call, compile excluded. Newton's series is taken
@@ -68,6 +70,25 @@ def cases(quick: bool):
         yield f"shared:{path.stem}", cp, {}, None, SOLVERS
 
 
+RATIOS = (1.0, 1e2, 1e4, 1e6, 1e8)
+
+
+def stiffness_cases(quick: bool):
+    """Miura-ori 10 x 10 at axial : crease stiffness ratios 1 to 1e8 (facets 20x the crease)."""
+    cp = patterns.miura_ori(10, 10)
+    exact = rigid_fold(cp)
+    for ratio in RATIOS[:2] if quick else RATIOS:
+        stiffness = {"axial": 1.0, "facet": 20.0 / ratio, "crease": 1.0 / ratio}
+        yield f"miura_10x10_ratio_{ratio:.0e}", cp, {"stiffness": stiffness}, exact, SOLVERS
+
+
+PARTS = {
+    # part: (cases, file prefix, plots, seconds per solve unless --max-time)
+    "main": (cases, "", True, 120.0),
+    "stiffness": (stiffness_cases, "stiffness_", False, 30.0),
+}
+
+
 def solver_object(name: str):
     return origami_simulator() if name == "origami_simulator" else name
 
@@ -84,7 +105,12 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=str(Path(__file__).parent / "results"))
     parser.add_argument("--solvers", default=None, help="only these (comma-separated names)")
     parser.add_argument("--tol", type=float, default=1e-10, help="grad_norm_rel tolerance")
-    parser.add_argument("--max-time", type=float, default=120.0, help="seconds per solve")
+    parser.add_argument(
+        "--max-time", type=float, default=None, help="seconds per solve (120; sweep 30)"
+    )
+    parser.add_argument(
+        "--part", choices=["all", *PARTS], default="all", help="main scenes, stiffness sweep"
+    )
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -93,15 +119,37 @@ def main(argv=None) -> int:
         f"{platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}, "
         f"device {device.platform}: {device.device_kind}"
     )
-    summary, history_rows, plots = [], [], {}
     only = None if args.solvers is None else set(args.solvers.split(","))
-    for name, cp, kwargs, reference, solvers in cases(args.quick):
+    for part, (make_cases, prefix, with_plots, max_time) in PARTS.items():
+        if args.part not in ("all", part):
+            continue
+        max_time = max_time if args.max_time is None else args.max_time
+        summary, history_rows, plots = run_cases(make_cases(args.quick), args, only, max_time)
+        write_csv(out / f"{prefix}summary.csv", summary)
+        write_csv(out / f"{prefix}history.csv", history_rows)
+        table = markdown(summary, machine)
+        (out / f"{prefix}results.md").write_text(table)
+        print(table)
+        if with_plots:
+            try:
+                plot(plots, out)
+            except ImportError:
+                print(
+                    "matplotlib not installed: no plots (pip install '.[bench]')", file=sys.stderr
+                )
+    return 0
+
+
+def run_cases(case_list, args, only, max_time: float) -> tuple[list, list, dict]:
+    """Fold every case with each of its solvers: summary rows, history rows, plot series."""
+    summary, history_rows, plots = [], [], {}
+    for name, cp, kwargs, reference, solvers in case_list:
         for solver in solvers:
             if only is not None and solver not in only:
                 continue
             common = dict(solver=solver_object(solver), tol=args.tol, **kwargs)
             first = fold(cp, max_iter=0, **common)  # compiles, runs nothing
-            run = dict(reference_positions=reference, max_time=args.max_time, max_iter=10**9)
+            run = dict(reference_positions=reference, max_time=max_time, max_iter=10**9)
             r = fold(cp, **run, **common)
             wall_time = r.wall_time
             if solver == "newton":  # resolve its few iterations: one sample each, timed apart
@@ -144,16 +192,7 @@ def main(argv=None) -> int:
                 flush=True,
             )
 
-    write_csv(out / "summary.csv", summary)
-    write_csv(out / "history.csv", history_rows)
-    table = markdown(summary, machine)
-    (out / "results.md").write_text(table)
-    print(table)
-    try:
-        plot(plots, out)
-    except ImportError:
-        print("matplotlib not installed: no plots (pip install '.[bench]')", file=sys.stderr)
-    return 0
+    return summary, history_rows, plots
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:

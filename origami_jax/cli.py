@@ -41,6 +41,7 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--percent", type=float, default=100.0, help="fold percent (default: 100)")
     f.add_argument("--tol", type=float, default=None, help="grad_norm_rel tolerance")
     f.add_argument("--max-iter", type=int, default=100_000, help="iteration limit")
+    f.add_argument("--max-time", type=float, default=None, help="time limit in seconds")
     f.add_argument("--float32", action="store_true", help="solve in float32 (default float64)")
     f.add_argument("--quiet", action="store_true", help="no progress bar")
     f.add_argument("--no-cache", action="store_true", help="no persistent compilation cache")
@@ -87,6 +88,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             solver=args.solver,
             tol=args.tol,
             max_iter=args.max_iter,
+            max_time=args.max_time,
             dtype=jnp.float32 if args.float32 else jnp.float64,
             progress=not args.quiet,
         )

@@ -39,6 +39,13 @@ def test_fold_file_input_and_mesh_output(tmp_path, capsys):
     assert "single_crease" in capsys.readouterr().out
 
 
+def test_time_limit_exits_1_with_reason(tmp_path, capsys):
+    out = tmp_path / "crease.fold"
+    argv = ["fold", "--example", "single_crease", "--out", str(out), "--quiet", "--max-time", "0"]
+    assert main(argv) == 1
+    assert "time limit reached" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [

@@ -4,13 +4,19 @@ to +-pi, failures reported with a reason. Plus what is particular to Newton.
 Patterns are few and small so that each solver compiles once per shape.
 """
 
+import dataclasses
+
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from origami_jax import fold, patterns
+from origami_jax.energy import make_params, make_structure
+from origami_jax.geometry import fold_angles
 from origami_jax.kinematics import rigid_fold
 from origami_jax.solvers import SOLVERS, Newton, Status
+from origami_jax.solvers.base import make_problem, positions, prepare
 
 SOLVER_NAMES = sorted(SOLVERS)
 
@@ -91,7 +97,7 @@ def test_newton_sparse_and_dense_agree():
 
 def test_newton_element_hessians_match_autodiff():
     """The assembled exact Hessian equals jax.hessian of the energy (gauge off)."""
-    from origami_jax.energy import energy, initial_reference, make_params, make_structure
+    from origami_jax.energy import energy, initial_reference
     from origami_jax.solvers.newton import element_hessians, hessian_layout
 
     cp = patterns.degree4_vertex(np.pi / 3, np.pi / 4, np.pi / 2)
@@ -116,3 +122,23 @@ def test_newton_element_hessians_match_autodiff():
 def test_newton_unknown_linear_solver():
     with pytest.raises(ValueError, match="unknown linear solver"):
         Newton(linear_solver="qr")
+
+
+def test_newton_dense_step_vmaps_over_percent():
+    """The dense Newton iteration is pure: jax.vmap folds one pattern to several percents."""
+    cp = patterns.single_crease(fold_angle=2.0)
+    mesh = cp.mesh
+    solver = Newton(linear_solver="dense")
+    params = make_params(cp)
+    problem = prepare(solver, make_problem(mesh, make_structure(mesh), params), mesh)
+
+    def solve(percent):
+        p = dataclasses.replace(problem, params=params._replace(percent=percent))
+        state = solver.run(solver.init(p), p, jnp.int32(100))
+        crease = fold_angles(positions(p, state.u), p.structure.hinges, state.reference)[0]
+        return state.status, crease
+
+    percents = jnp.array([0.25, 0.5, 1.0])
+    status, crease = jax.jit(jax.vmap(solve))(percents)
+    assert np.all(np.asarray(status) == Status.CONVERGED)
+    np.testing.assert_allclose(crease, 2.0 * np.asarray(percents), atol=1e-8)
