@@ -15,13 +15,14 @@ from origami_jax import patterns
 from origami_jax.energy import FoldParams, Stiffness, build_energy, energy
 from origami_jax.fold import FoldResult, fold
 from origami_jax.io import from_fold_dict, load, save, to_fold_dict
-from origami_jax.pattern import ASSIGNMENTS, CreasePattern, Mesh, PatternError
+from origami_jax.pattern import ASSIGNMENTS, CreasePattern, Mesh, PatternError, PatternWarning
 
 __all__ = [
     "ASSIGNMENTS",
     "CreasePattern",
     "Mesh",
     "PatternError",
+    "PatternWarning",
     "FoldParams",
     "Stiffness",
     "build_energy",

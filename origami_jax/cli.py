@@ -1,9 +1,11 @@
 """Command line: ``origami-jax fold INPUT|--example NAME --out OUT [options]``.
 
-Runs in float64 unless ``--float32`` is given, and keeps compiled solvers in a persistent cache
-(``$XDG_CACHE_HOME/origami_jax``, default ``~/.cache/origami_jax``; ``--no-cache`` to skip) so a
-second run on a pattern of the same size does not compile again: the CLI, unlike the library,
-may set JAX flags. Bad input prints one line ``error: ...`` and exits with code 2.
+Runs in float64 unless ``--float32`` is given. With ``--cache`` it keeps compiled solvers in a
+persistent cache (``$XDG_CACHE_HOME/origami_jax/<machine>``, default ``~/.cache/origami_jax``,
+one folder per CPU kind) so a second run on a pattern of the same size does not compile again;
+it is off by default because XLA 0.10 logs a CPU-feature warning on every cached load. The CLI,
+unlike the library, may set JAX flags. Bad input prints one line ``error: ...`` and exits with
+code 2.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 
 EXAMPLES = (
@@ -44,7 +47,11 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--max-time", type=float, default=None, help="time limit in seconds")
     f.add_argument("--float32", action="store_true", help="solve in float32 (default float64)")
     f.add_argument("--quiet", action="store_true", help="no progress bar")
-    f.add_argument("--no-cache", action="store_true", help="no persistent compilation cache")
+    f.add_argument(
+        "--cache",
+        action="store_true",
+        help="keep compiled code in a persistent cache (faster next runs; see the module doc)",
+    )
     return parser
 
 
@@ -62,6 +69,22 @@ def _load(args):
     return getattr(patterns, name)(), stiffness
 
 
+def _machine_key() -> str:
+    """A short hash of this machine's CPU model and features (XLA compiles for them)."""
+    import hashlib
+    import platform
+
+    text = platform.machine() + platform.processor()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            text += "".join(
+                line for line in f if line.startswith(("flags", "model name", "Features"))
+            )[:100_000]
+    except OSError:
+        pass
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     if not args.float32:
@@ -69,15 +92,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", not args.float32)
-    if not args.no_cache:
+    if args.cache:
         base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        jax.config.update("jax_compilation_cache_dir", os.path.join(base, "origami_jax"))
+        # one cache per CPU kind: code compiled for other CPU features must not be loaded
+        cache = os.path.join(base, "origami_jax", _machine_key())
+        jax.config.update("jax_compilation_cache_dir", cache)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     import jax.numpy as jnp
 
     from origami_jax import PatternError, io
     from origami_jax.fold import fold
 
+    def show_warning(message, category, *rest, **kw) -> None:  # one line, like errors
+        print(f"warning: {message}", file=sys.stderr)
+
+    warnings.showwarning = show_warning
     try:
         pattern, stiffness = _load(args)
         out = args.out or f"{pattern.name}-folded.fold"

@@ -214,7 +214,8 @@ def fold(
         default :func:`default_tol` of the dtype.
       max_iter: iteration limit; reaching it gives ``converged=False``.
       stiffness: a :class:`~origami_jax.energy.Stiffness` or dict (default ``Stiffness()``).
-      start: (V_mesh, 3) start positions (default: the flat pattern).
+      start: (V_mesh, 3) start positions (default: the pattern's ``start`` if it has one, a
+        pre-folded input, else the flat pattern).
       dtype: ``jnp.float32`` or ``jnp.float64``; default JAX's default float (float64 only
         when ``jax_enable_x64`` is on).
       reference_positions: an exact folded shape (V_mesh, 3) to report ``shape_error`` against.
@@ -251,6 +252,8 @@ def fold(
         )
     tol = default_tol(dtype) if tol is None else float(tol)
     mesh = pattern.mesh
+    if start is None and pattern.start is not None:
+        start = pattern.start[mesh.source_vertex]
     if start is not None:
         start = np.asarray(start, np.float64)
         if start.shape != mesh.vertices.shape:

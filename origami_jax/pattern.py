@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["PatternError", "CreasePattern", "Mesh", "ASSIGNMENTS"]
+__all__ = ["PatternError", "PatternWarning", "CreasePattern", "Mesh", "ASSIGNMENTS"]
 
 ASSIGNMENTS = "BMVFUCJ"
 _DRIVEN, _FACET, _FREE, _BORDER = "driven", "facet", "free", "border"
@@ -41,6 +41,14 @@ class PatternError(ValueError):
 
     The message names the offending vertex, edge or face and the problem, for example
     ``"edge 7 (vertices 3, 9): names vertex 9, but there are only 9 vertices"``.
+    """
+
+
+class PatternWarning(UserWarning):
+    """An input was read, but something in it was changed or ignored.
+
+    For example a line of an unknown colour in an SVG, a crease on the paper's edge made a
+    border, or a FOLD file with no ``file_spec``. The message names the element.
     """
 
 
@@ -55,7 +63,7 @@ class Mesh:
     Arrays (``V`` vertices, ``E`` edges, ``T`` triangles):
 
     * ``vertices`` (V, 3) float64: rest (flat) positions; the pattern's own vertices first, then
-      copies made by cuts;
+      copies made by cuts; ``source_vertex`` (V,) int: the pattern vertex each one copies;
     * ``edges`` (E, 2) int: the pattern's edges first (a cut edge stands for its first side),
       then the second sides of cut edges, then triangulation edges;
     * ``source_edge`` (E,) int: the pattern edge each edge comes from (-1 for triangulation edges);
@@ -67,6 +75,7 @@ class Mesh:
     """
 
     vertices: np.ndarray
+    source_vertex: np.ndarray
     edges: np.ndarray
     source_edge: np.ndarray
     triangles: np.ndarray
@@ -101,6 +110,8 @@ class CreasePattern:
       fold_angles: (E,) target fold angles in radians; default -pi for ``M``, +pi for ``V``,
         0 otherwise.
       name: a label used in reports.
+      start: optional (V, 3) positions of a folded state of these vertices (a pre-folded
+        input, e.g. a FOLD folded form): :func:`~origami_jax.fold` starts from it by default.
 
     Raises:
       PatternError: naming the vertex, edge or face at fault.
@@ -124,6 +135,7 @@ class CreasePattern:
     assignments: np.ndarray = field(default=None)  # type: ignore[assignment]
     fold_angles: np.ndarray = field(default=None)  # type: ignore[assignment]
     name: str = "pattern"
+    start: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         vertices = _check_vertices(self.vertices)
@@ -135,7 +147,9 @@ class CreasePattern:
         _check_edge_geometry(vertices, edges)
         _check_face_edges(edges, faces, edge_faces, assignments)
         faces = tuple(_counterclockwise(vertices, f, k) for k, f in enumerate(faces))
+        start = None if self.start is None else _check_start(self.start, len(vertices))
         for name, value in [
+            ("start", start),
             ("vertices", vertices),
             ("edges", edges),
             ("faces", faces),
@@ -171,7 +185,13 @@ class CreasePattern:
     def with_fold_angles(self, fold_angles: Sequence[float] | np.ndarray) -> CreasePattern:
         """A copy with other target fold angles (radians), validated again."""
         return CreasePattern(
-            self.vertices, self.edges, self.faces, self.assignments, fold_angles, self.name
+            self.vertices,
+            self.edges,
+            self.faces,
+            self.assignments,
+            fold_angles,
+            self.name,
+            self.start,
         )
 
     # -- the triangulated mesh the energy is built on ----------------------------------------
@@ -222,6 +242,17 @@ def _check_vertices(vertices) -> np.ndarray:
         v = v.copy()
         v[:, 2] = 0.0
     return v
+
+
+def _check_start(start, num_vertices: int) -> np.ndarray:
+    x = _as_array(start, np.float64, "start")
+    if x.shape != (num_vertices, 3):
+        raise PatternError(f"start: expected shape ({num_vertices}, 3), got {x.shape}")
+    bad = ~np.isfinite(x).all(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise PatternError(f"start: vertex {k} has non-finite position {x[k].tolist()}")
+    return x
 
 
 def _check_edges(edges, num_vertices: int) -> np.ndarray:
@@ -376,14 +407,15 @@ def _check_face_edges(edges, faces, edge_faces, assignments) -> None:
             )
 
 
-def _signed_area(points: np.ndarray) -> float:
+def signed_area(points: np.ndarray) -> float:
+    """Signed area of a polygon (N, 2), positive when counterclockwise."""
     x, y = points[:, 0], points[:, 1]
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
 def _counterclockwise(vertices, face, k) -> tuple[int, ...]:
     pts = vertices[list(face), :2]
-    area = _signed_area(pts)
+    area = signed_area(pts)
     span = np.ptp(pts, axis=0).max()
     if abs(area) <= 1e-12 * span * span:
         raise PatternError(f"face {k}: has zero area (vertices {list(face)})")
@@ -440,10 +472,12 @@ def find_root(parent, v):
     return v
 
 
-def _split_cuts(vertices, triangles, cut_keys) -> tuple[np.ndarray, np.ndarray]:
-    """Give each fan of triangles around a vertex, separated by cut edges, its own vertex copy."""
+def _split_cuts(vertices, triangles, cut_keys) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Give each fan of triangles around a vertex, separated by cut edges, its own vertex copy.
+
+    Returns the vertices, the triangles and the source vertex of each vertex."""
     if not cut_keys:
-        return vertices, triangles
+        return vertices, triangles, np.arange(len(vertices))
     out = triangles.copy()
     around: dict[int, list[int]] = {}
     for t, tri in enumerate(triangles):
@@ -451,6 +485,7 @@ def _split_cuts(vertices, triangles, cut_keys) -> tuple[np.ndarray, np.ndarray]:
             around.setdefault(int(v), []).append(t)
     cut_vertices = sorted({v for key in cut_keys for v in key})
     new_vertices = [vertices]
+    source = list(range(len(vertices)))
     count = len(vertices)
     for v in cut_vertices:
         tris = around[v]
@@ -472,8 +507,9 @@ def _split_cuts(vertices, triangles, cut_keys) -> tuple[np.ndarray, np.ndarray]:
             for t in group:
                 out[t][triangles[t] == v] = count
             new_vertices.append(vertices[v][None])
+            source.append(v)
             count += 1
-    return np.concatenate(new_vertices), out
+    return np.concatenate(new_vertices), out, np.array(source, dtype=np.int64)
 
 
 def _build_mesh(cp: CreasePattern) -> Mesh:
@@ -496,7 +532,7 @@ def _build_mesh(cp: CreasePattern) -> Mesh:
             if key not in pattern_key:
                 extra[key] = None
 
-    split_vertices, split_tri = _split_cuts(vertices, tri, cut_keys)
+    split_vertices, split_tri, source_vertex = _split_cuts(vertices, tri, cut_keys)
 
     # map each (directed) triangle side to its triangle, in the split mesh
     side_owner: dict[tuple[int, int], int] = {}
@@ -556,6 +592,7 @@ def _build_mesh(cp: CreasePattern) -> Mesh:
     hinge_arr = np.array(hinges, dtype=np.int64)
     mesh = Mesh(
         vertices=split_vertices,
+        source_vertex=source_vertex,
         edges=hinge_arr[:, :2].copy(),
         source_edge=np.array(source, dtype=np.int64),
         triangles=split_tri,
@@ -566,6 +603,7 @@ def _build_mesh(cp: CreasePattern) -> Mesh:
     )
     for arr in (
         mesh.vertices,
+        mesh.source_vertex,
         mesh.edges,
         mesh.source_edge,
         mesh.triangles,

@@ -72,7 +72,8 @@ def test_malformed_file_from_the_shell(tmp_path):
     )
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ")
+    assert lines[-1].startswith("error: ") and "vertices_coords[1][1]" in lines[-1]
+    assert lines[:-1] == ["warning: file_spec missing; read as FOLD 1.2"]
     assert not (tmp_path / "o.fold").exists()
 
 

@@ -199,20 +199,35 @@ def test_missing_edges_are_computed_from_faces():
     assert sorted(cp.assignments) == ["B"] * 6 + ["U"]
 
 
-def test_missing_faces_is_a_clear_error():
-    data = to_fold_dict(diagonal_valley())
+@pytest.mark.parametrize("make", PATTERNS)
+def test_missing_faces_are_computed_from_the_edges(make):
+    cp = make()
+    data = to_fold_dict(cp)
     del data["faces_vertices"]
-    with pytest.raises(PatternError, match="faces_vertices missing"):
-        from_fold_dict(data)
+    got = from_fold_dict(data)
+    # same vertices (numbers kept), same edges with the same letters and angles, same faces
+    np.testing.assert_array_equal(got.vertices, cp.vertices)
+    key = {tuple(sorted(e)): k for k, e in enumerate(cp.edges.tolist())}
+    order = [key[tuple(sorted(e))] for e in got.edges.tolist()]
+    assert sorted(order) == list(range(cp.num_edges))
+    np.testing.assert_array_equal(got.assignments, cp.assignments[order])
+    np.testing.assert_allclose(got.fold_angles, cp.fold_angles[order], atol=1e-12)
+    assert canonical_faces(got.faces) == canonical_faces(cp.faces)
 
 
-def test_three_dimensional_coordinates_are_refused():
-    data = to_fold_dict(diagonal_valley())
+def test_three_dimensional_coordinates_are_a_prefolded_start():
+    cp = diagonal_valley()
+    data = to_fold_dict(cp)
     data["vertices_coords"] = [[x, y, 0.0] for x, y in data["vertices_coords"]]
-    from_fold_dict(data)  # z = 0 is fine
+    assert from_fold_dict(data).start is None  # z = 0 is a crease pattern
     data["vertices_coords"][2][2] = 0.25
-    with pytest.raises(PatternError, match=r"vertices_coords\[2\]: z = 0.25.*flat"):
-        from_fold_dict(data)
+    got = from_fold_dict(data)
+    np.testing.assert_array_equal(got.start, np.array(data["vertices_coords"]))
+    # unfolded: every edge keeps its folded length, the faces are counterclockwise
+    folded = np.linalg.norm(np.subtract(*got.start[got.edges.T]), axis=1)
+    flat = np.linalg.norm(np.subtract(*got.vertices[got.edges.T]), axis=1)
+    np.testing.assert_allclose(flat, folded, rtol=1e-12)
+    assert np.all(got.vertices[:, 2] == 0)
 
 
 def test_lowercase_assignments_and_integral_floats_are_accepted():
@@ -264,8 +279,8 @@ def test_result_frame_inherits_when_no_vertex_is_split(tmp_path):
     raw = json.loads(path.read_text())
     np.testing.assert_array_equal(np.array(raw["file_frames"][0]["vertices_coords"]), res.positions)
     assert_same_pattern(cp, load(path))
-    # frame 1 is a 3-D folded form, not a crease pattern
-    with pytest.raises(PatternError, match=r"frame 1 \(file_frames\[0\]\).*folded form"):
+    # frame 1 is a 3-D folded form whose quadrilateral faces bend: it does not unfold
+    with pytest.raises(PatternError, match=r"frame 1 \(file_frames\[0\]\).*not planar"):
         load_fold(path, frame=1)
 
 
@@ -344,10 +359,9 @@ def test_crease_pattern_frame_is_chosen_over_folded_top_level(inherit):
     data = folded_top_with_cp_frame(inherit)
     assert_same_pattern(diagonal_valley(), from_fold_dict(data))
     assert_same_pattern(diagonal_valley(), from_fold_dict(data, frame=2))
-    with pytest.raises(PatternError, match="folded form") as info:
-        from_fold_dict(data, frame=0)
-    assert "vertices_coords[3]" in str(info.value)
-    assert "no creasePattern frame" not in str(info.value)
+    folded = from_fold_dict(data, frame=0)  # the folded form itself, unfolded
+    np.testing.assert_array_equal(folded.start, np.array(data["vertices_coords"], float))
+    assert folded.num_faces == 2
 
 
 def test_frame_selection_errors():
@@ -373,11 +387,26 @@ def test_inherited_keys_are_overridden_by_the_child():
     assert from_fold_dict(data).fold_angles[4] == pytest.approx(np.pi)
 
 
-def test_folded_form_without_crease_pattern_frame_is_a_clear_error():
+def test_flat_folded_form_unfolds_to_the_square():
     data = to_fold_dict(diagonal_valley())
     data["frame_classes"] = ["foldedForm"]
     data["vertices_coords"][3] = [1.0, 0.0]  # flat-folded along the diagonal: face 1 flipped
-    with pytest.raises(PatternError, match="folded form.*no creasePattern frame"):
+    got = from_fold_dict(data)
+    np.testing.assert_allclose(got.start[3], [1.0, 0.0, 0.0])
+    side = np.linalg.norm(np.subtract(*got.vertices[got.edges.T]), axis=1)
+    np.testing.assert_allclose(side, [1, 1, 1, 1, np.sqrt(2)], rtol=1e-12)
+
+
+def test_folded_form_that_does_not_unfold_is_a_clear_error():
+    # a closed pyramid of four triangles on a square: the apex vertex closes up
+    data = {
+        "vertices_coords": [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0.5]],
+        "faces_vertices": [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]],
+    }
+    with pytest.raises(PatternError, match=r"unfolding puts vertex \d at two places"):
+        from_fold_dict(data)
+    data["faces_vertices"] = [[0, 1, 2, 4]]
+    with pytest.raises(PatternError, match=r"faces_vertices\[0\]: is not planar"):
         from_fold_dict(data)
 
 
@@ -414,8 +443,9 @@ def test_fold_spec_diagonal_crease_pattern():
     cp = load(path)
     assert "".join(cp.assignments) == "BBBBV"
     assert cp.fold_angles[4] == pytest.approx(np.pi)
-    with pytest.raises(PatternError, match="folded form"):
-        load(path.with_name("diagonal-folded.fold"))
+    folded = load(path.with_name("diagonal-folded.fold"))  # unfolds to the same square
+    side = np.linalg.norm(np.subtract(*folded.vertices[folded.edges.T]), axis=1)
+    np.testing.assert_allclose(side, np.linalg.norm(np.subtract(*cp.vertices[cp.edges.T]), axis=1))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -462,7 +492,6 @@ MALFORMED = [
     (_set(["vertices_coords", 2], [1, None]), "vertices_coords[2][1]: expected a number"),
     (_set(["vertices_coords", 2], [1, float("nan")]), "vertices_coords[2][1]: expected a finite"),
     (_set(["vertices_coords", 2], [10**400, 1]), "vertices_coords[2][0]: expected a finite"),
-    (_set(["vertices_coords", 2], [1, 1, 0.5]), "vertices_coords[2]: z = 0.5"),
     (_set(["vertices_coords", 2], [1, 0]), "edge 1 (vertices 1, 2): has zero length"),
     (_set(["edges_vertices"], {"a": 1}), "edges_vertices: expected an array"),
     (_set(["edges_vertices", 4], [0]), "edges_vertices[4]: expected 2 vertex indices"),
@@ -474,7 +503,7 @@ MALFORMED = [
     (_set(["edges_vertices", 4], [0, -1]), "edges_vertices[4]: vertex index -1 is out of range"),
     (_set(["edges_vertices", 4], [0, 10**30]), "edges_vertices[4]: vertex index 1000"),
     (_set(["edges_vertices", 4], [0, 0]), "edge 4 (vertices 0, 0): joins a vertex to itself"),
-    (_set(["edges_vertices", 4], [1, 0]), "edge 4 (vertices 1, 0): duplicates edge 0"),
+    (_set(["edges_vertices", 4], [1, 0]), "edges_vertices[0] and edges_vertices[4]: the same"),
     (_set(["edges_vertices"], []), "edges_vertices: is empty"),
     (_set(["edges_assignment"], "BBBBV"), "edges_assignment: expected an array"),
     (_set(["edges_assignment", 4], "X"), "edges_assignment[4]: expected one of the letters"),
@@ -494,7 +523,12 @@ MALFORMED = [
     (_set(["edges_foldAngle", 0], 10), "edge 0: assignment B takes no fold angle"),
     (_set(["edges_foldAngle"], [0, 0, 0]), "edges_foldAngle: has 3 entries"),
     (_del("edges_vertices"), "edges_vertices missing"),
-    (_del("faces_vertices"), "faces_vertices missing"),
+    (
+        lambda d: _del("faces_vertices")(
+            _del("edges_vertices")(_del("edges_assignment")(_del("edges_foldAngle")(d)))
+        ),
+        "the frame has neither faces_vertices nor edges_vertices",
+    ),
     (_set(["faces_vertices"], []), "faces_vertices: is empty"),
     (_set(["faces_vertices"], 3), "faces_vertices: expected an array"),
     (_set(["faces_vertices", 1], 3), "faces_vertices[1]: expected an array of vertex indices"),
@@ -528,7 +562,7 @@ MALFORMED_FRAMES = [
         [{"frame_inherit": True, "edges_foldAngle": ["x", 0, 0, 0, 0]}],
         "frame 1 (file_frames[0]): edges_foldAngle[0]: expected a number",
     ),
-    ([{"vertices_coords": [[0, 0]]}], "frame 1 (file_frames[0]): faces_vertices missing"),
+    ([{"vertices_coords": [[0, 0]]}], "frame 1 (file_frames[0]): the frame has neither"),
 ]
 
 
@@ -583,12 +617,14 @@ def test_missing_file_and_folder_name_the_path(tmp_path):
 
 
 def test_unsupported_suffixes(tmp_path):
-    with pytest.raises(PatternError, match=r"unsupported input format '\.svg' \(supported: \.fold"):
-        load(tmp_path / "x.svg")
+    with pytest.raises(PatternError, match=r"unsupported input format '\.dxf' \(supported: \.fold"):
+        load(tmp_path / "x.dxf")
     with pytest.raises(PatternError, match=r"unsupported input format \(no suffix\)"):
         load(tmp_path / "x")
     for bad in ("x.xyz", "x"):
-        with pytest.raises(ValueError, match=r"supported: \.fold, \.json, \.obj, \.ply") as info:
+        with pytest.raises(
+            ValueError, match=r"supported: \.fold, \.json, \.svg, \.obj, \.ply"
+        ) as info:
             save(tmp_path / bad, diagonal_valley())
         assert type(info.value) is ValueError
     with pytest.raises(ValueError, match=r"supported: \.obj, \.ply, \.stl, \.vtu") as info:

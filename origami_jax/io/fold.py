@@ -12,17 +12,27 @@ spelling ``edges_foldAngles`` is accepted too) and ``faces_vertices``; everythin
 * A missing ``edges_assignment`` is left to the pattern: ``B`` on edges with one face, ``U``
   elsewhere.
 * A missing ``edges_vertices`` (with no ``edges_assignment`` or ``edges_foldAngle``) is computed
-  from the sides of the faces; a missing ``faces_vertices`` is an error.
-* Coordinates are ``[x, y]`` or ``[x, y, z]`` with ``z = 0``: a crease pattern is flat.
-* ``file_spec`` is not checked.
+  from the sides of the faces.
+* A missing ``faces_vertices`` (in a flat frame) is computed from the edges: the faces of their
+  planar arrangement (:func:`~origami_jax.io.planar.pattern_from_segments`: crossing edges are
+  split, end points within 1e-9 of the diagonal merge, holes are regions bounded by ``B``
+  edges only inside another face). The vertices keep their order, new crossing points last.
+* Edges given twice are merged (a :class:`~origami_jax.PatternWarning`); twice with different
+  assignments or fold angles is an error naming both.
+* ``J`` (join) edges are facet creases; ``C`` (cut) edges split the paper.
+* Coordinates are ``[x, y]`` or ``[x, y, z]``. A frame that is 3-D, or flat with faces turned
+  clockwise (flipped over), is a **folded form**: it is unfolded onto the plane face by face
+  (breadth first over shared edges, separate pieces side by side) to give the crease pattern,
+  and its own positions become the pattern's ``start``, from which :func:`~origami_jax.fold`
+  starts. A folded form that does not unfold to a flat sheet (a non-planar face, or a vertex
+  that two faces put at different places, as in a closed box) is an error naming them.
+* A missing ``file_spec``, or one that is not a number from 1 to 1.2, gives a warning.
 
 Frames: frame 0 is the top level, frame ``k >= 1`` is ``file_frames[k - 1]``. A frame with
 ``frame_inherit: true`` takes the keys it does not set from its ``frame_parent`` (frame 0 when the
 parent is not given), recursively. Without an explicit ``frame``, the top level is read, unless
 its ``frame_classes`` say ``foldedForm`` (and not ``creasePattern``) and some frame of
-``file_frames`` has the class ``creasePattern``: then the first such frame is read. A frame of
-class ``foldedForm`` read as a crease pattern must be an unfolded state: flat, all faces
-counterclockwise; otherwise the error says it is a folded form.
+``file_frames`` has the class ``creasePattern``: then the first such frame is read.
 
 Every malformed input raises :class:`~origami_jax.PatternError` naming the key and element, for
 example ``"edges_vertices[3]: vertex index 9 is out of range (the frame has 9 vertices)"``; errors
@@ -70,13 +80,21 @@ import math
 import numbers
 import os
 import tempfile
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from origami_jax.pattern import ASSIGNMENTS, CreasePattern, PatternError
+from origami_jax.io.planar import pattern_from_segments
+from origami_jax.pattern import (
+    ASSIGNMENTS,
+    CreasePattern,
+    PatternError,
+    PatternWarning,
+    signed_area,
+)
 
 __all__ = ["from_fold_dict", "load_fold", "to_fold_dict", "save_fold"]
 
@@ -86,6 +104,8 @@ FILE_CREATOR = "origami_jax"
 # the frame keys read; inheritance (frame_inherit) covers every key except these
 _NOT_INHERITED = ("frame_parent", "frame_inherit")
 _DEFAULT_DEGREES = {"M": -180.0, "V": 180.0}
+# FOLD coordinates are exact: only end points within 1e-9 of the diagonal merge
+FOLD_TOLERANCE = 1e-9
 
 
 # ---------------------------------------------------------------------------------------------
@@ -225,6 +245,16 @@ def _resolve(data: dict, frames: list[dict], k: int) -> dict:
 # reading
 
 
+def _check_file_spec(spec: Any) -> None:
+    if spec is None:
+        message = "file_spec missing; read as FOLD 1.2"
+    elif not _is_number(spec) or not 1.0 <= float(spec) <= FILE_SPEC:
+        message = f"file_spec {spec!r} is not a FOLD version 1 to 1.2; read as FOLD 1.2"
+    else:
+        return
+    warnings.warn(message, PatternWarning, stacklevel=4)
+
+
 def from_fold_dict(data: dict, frame: int | None = None) -> CreasePattern:
     """The crease pattern of a FOLD dictionary (a parsed ``.fold`` file).
 
@@ -240,6 +270,7 @@ def from_fold_dict(data: dict, frame: int | None = None) -> CreasePattern:
         raise PatternError(
             f"FOLD data: expected a JSON object at the top level, got {_type_name(data)}"
         )
+    _check_file_spec(data.get("file_spec"))
     frames = _frames(data)
     if frame is None:
         k = _choose_frame(data, frames)
@@ -253,35 +284,21 @@ def from_fold_dict(data: dict, frame: int | None = None) -> CreasePattern:
     fr = _resolve(data, frames, k)
     prefix = "" if k == 0 else f"{_frame_name(k)}: "
     try:
-        classes = _classes(fr, 0)
+        _classes(fr, 0)  # checked, though any frame is read the same way
         name = fr.get("frame_title", data.get("file_title", "pattern"))
         if not isinstance(name, str) or not name:
             name = "pattern"
-        return _read_frame(
-            fr,
-            name,
-            folded="foldedForm" in classes and "creasePattern" not in classes,
-            chosen=frame is None,
-        )
+        return _read_frame(fr, name)
     except PatternError as exc:
         raise PatternError(f"{prefix}{exc}") from None
 
 
-def _read_frame(fr: dict, name: str, folded: bool, chosen: bool) -> CreasePattern:
+def _read_frame(fr: dict, name: str) -> CreasePattern:
     vertices = _read_vertices(fr)
     nv = len(vertices)
-    if "faces_vertices" not in fr:
-        raise PatternError(
-            "faces_vertices missing: the frame has no faces, and computing faces from the edges "
-            "is not supported yet; add faces_vertices (one counterclockwise array of vertex "
-            "indices per face)"
-        )
-    faces = _read_index_lists(fr["faces_vertices"], "faces_vertices", nv, exact=None)
-    if folded:
-        _check_unfolded(vertices, faces, chosen)
-    else:
-        _check_flat(vertices)
-
+    faces = None
+    if "faces_vertices" in fr:
+        faces = _read_index_lists(fr["faces_vertices"], "faces_vertices", nv, exact=None)
     angle_key = "edges_foldAngle" if "edges_foldAngle" in fr else "edges_foldAngles"
     if "edges_vertices" in fr:
         edges = _read_index_lists(fr["edges_vertices"], "edges_vertices", nv, exact=2)
@@ -290,45 +307,30 @@ def _read_frame(fr: dict, name: str, folded: bool, chosen: bool) -> CreasePatter
             "edges_vertices missing: the frame has edges_assignment or edges_foldAngle "
             "but no edges_vertices to attach them to"
         )
-    else:
+    elif faces is not None:
         edges = _edges_of_faces(faces)
+    else:
+        raise PatternError("the frame has neither faces_vertices nor edges_vertices")
     ne = len(edges)
+    assignments = _read_assignments(fr, ne)
+    fold_angles = _read_fold_angles(fr, angle_key, ne, assignments)
+    edges, assignments, fold_angles = _merge_duplicates(edges, assignments, fold_angles)
 
-    assignments = None
-    if "edges_assignment" in fr:
-        letters = _array(fr["edges_assignment"], "edges_assignment")
-        if len(letters) != ne:
+    flat = not np.any(np.abs(vertices[:, 2]) > 1e-12 * _scale(vertices))
+    if faces is None:
+        if not flat:
             raise PatternError(
-                f"edges_assignment: has {len(letters)} entries, but edges_vertices has {ne} edges"
+                "faces_vertices missing and vertices_coords are 3-D: a folded form needs its "
+                "faces to be unfolded"
             )
-        assignments = []
-        for i, a in enumerate(letters):
-            if not isinstance(a, str) or a.upper() not in tuple(ASSIGNMENTS):
-                raise PatternError(
-                    f"edges_assignment[{i}]: expected one of the letters "
-                    f"{', '.join(ASSIGNMENTS)}, got {_type_name(a)}"
-                )
-            assignments.append(a.upper())
-
-    fold_angles = None
-    if angle_key in fr:
-        degrees = _array(fr[angle_key], angle_key)
-        if len(degrees) != ne:
-            raise PatternError(
-                f"{angle_key}: has {len(degrees)} entries, but edges_vertices has {ne} edges"
-            )
-        rad = np.empty(ne)
-        for i, d in enumerate(degrees):
-            if d is None:
-                default = _DEFAULT_DEGREES.get(assignments[i], 0.0) if assignments else 0.0
-                rad[i] = math.radians(default)
-                continue
-            deg = _float(d, f"{angle_key}[{i}]")
-            if abs(deg) > 180.0 * (1 + 1e-12):
-                raise PatternError(f"{angle_key}[{i}]: {deg:g} degrees is outside [-180, 180]")
-            rad[i] = math.radians(deg)
-        fold_angles = rad
-
+        return _pattern_from_edges(vertices, edges, assignments, fold_angles, name)
+    start = None
+    span2 = _scale(vertices) ** 2
+    if not flat or any(signed_area(vertices[face, :2]) < -1e-9 * span2 for face in faces):
+        # a folded form (3-D, or flat with faces flipped over): unfolded to the crease
+        # pattern, its positions kept as the start
+        start = vertices
+        vertices = _develop(vertices, faces)
     return CreasePattern(
         vertices=vertices,
         edges=np.array(edges, dtype=np.int64).reshape(-1, 2),
@@ -336,7 +338,182 @@ def _read_frame(fr: dict, name: str, folded: bool, chosen: bool) -> CreasePatter
         assignments=assignments,
         fold_angles=fold_angles,
         name=name,
+        start=start,
     )
+
+
+def _read_assignments(fr: dict, ne: int) -> list[str] | None:
+    if "edges_assignment" not in fr:
+        return None
+    letters = _array(fr["edges_assignment"], "edges_assignment")
+    if len(letters) != ne:
+        raise PatternError(
+            f"edges_assignment: has {len(letters)} entries, but edges_vertices has {ne} edges"
+        )
+    out = []
+    for i, a in enumerate(letters):
+        if not isinstance(a, str) or a.upper() not in tuple(ASSIGNMENTS):
+            raise PatternError(
+                f"edges_assignment[{i}]: expected one of the letters "
+                f"{', '.join(ASSIGNMENTS)}, got {_type_name(a)}"
+            )
+        out.append(a.upper())
+    return out
+
+
+def _read_fold_angles(fr: dict, key: str, ne: int, assignments) -> np.ndarray | None:
+    if key not in fr:
+        return None
+    degrees = _array(fr[key], key)
+    if len(degrees) != ne:
+        raise PatternError(f"{key}: has {len(degrees)} entries, but edges_vertices has {ne} edges")
+    rad = np.empty(ne)
+    for i, d in enumerate(degrees):
+        if d is None:
+            default = _DEFAULT_DEGREES.get(assignments[i], 0.0) if assignments else 0.0
+            rad[i] = math.radians(default)
+            continue
+        deg = _float(d, f"{key}[{i}]")
+        if abs(deg) > 180.0 * (1 + 1e-12):
+            raise PatternError(f"{key}[{i}]: {deg:g} degrees is outside [-180, 180]")
+        rad[i] = math.radians(deg)
+    return rad
+
+
+def _merge_duplicates(edges, assignments, fold_angles):
+    """Drop repeated edges that agree (with a warning); repeated edges that disagree are an
+    error naming both."""
+    first: dict[tuple[int, int], int] = {}
+    keep = []
+    for i, (a, b) in enumerate(edges):
+        key = (min(a, b), max(a, b))
+        j = first.setdefault(key, i)
+        if j == i:
+            keep.append(i)
+            continue
+        what = f"edges_vertices[{j}] and edges_vertices[{i}]: the same edge (vertices {a}, {b})"
+        if assignments is not None and assignments[i] != assignments[j]:
+            raise PatternError(
+                f"{what} with different assignments ({assignments[j]} and {assignments[i]})"
+            )
+        if fold_angles is not None and fold_angles[i] != fold_angles[j]:
+            raise PatternError(
+                f"{what} with different fold angles ({math.degrees(fold_angles[j]):g} and "
+                f"{math.degrees(fold_angles[i]):g} degrees)"
+            )
+        warnings.warn(f"{what} twice; the repeat is dropped", PatternWarning, stacklevel=6)
+    if len(keep) == len(edges):
+        return edges, assignments, fold_angles
+    return (
+        [edges[i] for i in keep],
+        None if assignments is None else [assignments[i] for i in keep],
+        None if fold_angles is None else fold_angles[keep],
+    )
+
+
+def _pattern_from_edges(vertices, edges, assignments, fold_angles, name) -> CreasePattern:
+    """Faces of a flat frame without faces_vertices: the planar arrangement of its edges."""
+    e = np.asarray(edges, dtype=np.int64)
+    letters = assignments if assignments is not None else ["U"] * len(e)
+    if fold_angles is None:
+        fold_angles = [math.radians(_DEFAULT_DEGREES.get(a, 0.0)) for a in letters]
+    return pattern_from_segments(
+        vertices[e[:, 0], :2],
+        vertices[e[:, 1], :2],
+        letters,
+        fold_angles,
+        [f"edges_vertices[{i}]" for i in range(len(e))],
+        tolerance=FOLD_TOLERANCE,
+        name=name,
+        vertex_order=vertices[:, :2],
+    )
+
+
+def _develop(vertices: np.ndarray, faces: list[list[int]]) -> np.ndarray:
+    """Flat positions of a folded form: each face unfolded onto the plane next to its
+    neighbour, breadth first over shared edges, one piece after another along x.
+
+    Raises:
+      PatternError: a face that is not planar, or a vertex that two faces put in different
+        places (the folded form does not unfold to a flat sheet, e.g. a closed box).
+    """
+    scale = max(float(np.ptp(vertices, axis=0).max()), 1e-300)
+    tol = 1e-4 * scale  # folded forms in files are often rounded to a few digits
+    local = [_face_frame(vertices, face, f, tol) for f, face in enumerate(faces)]
+    by_edge: dict[tuple[int, int], list[int]] = {}
+    for f, face in enumerate(faces):
+        for a, b in zip(face, face[1:] + face[:1], strict=True):
+            by_edge.setdefault((min(a, b), max(a, b)), []).append(f)
+    flat = np.full((len(vertices), 2), np.nan)
+    placed_face = np.zeros(len(faces), dtype=bool)
+    x_offset = 0.0
+    for root in range(len(faces)):
+        if placed_face[root]:
+            continue
+        piece = [root]
+        pts = local[root]
+        shift = np.array([x_offset - pts[:, 0].min(), -pts[:, 1].min()])
+        _place(flat, faces[root], pts + shift, root, tol)
+        placed_face[root] = True
+        queue = [root]
+        while queue:
+            f = queue.pop(0)
+            face = faces[f]
+            for a, b in zip(face, face[1:] + face[:1], strict=True):
+                for g in by_edge[(min(a, b), max(a, b))]:
+                    if placed_face[g]:
+                        continue
+                    _place(flat, faces[g], _fit(local[g], faces[g], a, b, flat), g, tol)
+                    placed_face[g] = True
+                    piece.append(g)
+                    queue.append(g)
+        used = sorted({v for f in piece for v in faces[f]})
+        x_offset = float(flat[used, 0].max()) + 0.1 * scale
+    return flat
+
+
+def _face_frame(vertices: np.ndarray, face: list[int], f: int, tol: float) -> np.ndarray:
+    """The face's vertices in its own plane (2-D, counterclockwise about its normal)."""
+    p = vertices[face]
+    normal = np.zeros(3)
+    for i in range(len(face)):  # Newell's method: the normal of a polygon, orientation kept
+        normal += np.cross(p[i], p[(i + 1) % len(face)])
+    size = np.linalg.norm(normal)
+    if size <= 1e-300:
+        raise PatternError(f"faces_vertices[{f}]: has zero area")
+    normal /= size
+    off = np.abs((p - p.mean(0)) @ normal)
+    if off.max() > tol:
+        i = int(off.argmax())
+        raise PatternError(
+            f"faces_vertices[{f}]: is not planar (vertex {face[i]} is {off[i]:.3g} off its plane)"
+        )
+    x = p[1] - p[0]
+    x /= np.linalg.norm(x)
+    y = np.cross(normal, x)
+    return np.stack([(p - p[0]) @ x, (p - p[0]) @ y], axis=1)
+
+
+def _fit(pts: np.ndarray, face: list[int], a: int, b: int, flat: np.ndarray) -> np.ndarray:
+    """The face's local points moved rigidly so its vertices a and b land where they are."""
+    ia, ib = face.index(a), face.index(b)
+    u, w = pts[ib] - pts[ia], flat[b] - flat[a]
+    angle = math.atan2(w[1], w[0]) - math.atan2(u[1], u[0])
+    c, s = math.cos(angle), math.sin(angle)
+    rot = np.array([[c, -s], [s, c]])
+    return (pts - pts[ia]) @ rot.T + flat[a]
+
+
+def _place(flat: np.ndarray, face: list[int], pts: np.ndarray, f: int, tol: float) -> None:
+    for v, q in zip(face, pts, strict=True):
+        if np.isnan(flat[v, 0]):
+            flat[v] = q
+        elif np.linalg.norm(flat[v] - q) > tol:
+            raise PatternError(
+                f"faces_vertices[{f}]: unfolding puts vertex {v} at two places "
+                f"({flat[v, 0]:.6g}, {flat[v, 1]:.6g}) and ({q[0]:.6g}, {q[1]:.6g}): "
+                "the folded form does not unfold to a flat sheet"
+            )
 
 
 def _read_vertices(fr: dict) -> np.ndarray:
@@ -402,39 +579,6 @@ def _edges_of_faces(faces: list[list[int]]) -> list[list[int]]:
 
 def _scale(vertices: np.ndarray) -> float:
     return max(float(np.abs(vertices[:, :2]).max()), 1e-300)
-
-
-def _check_flat(vertices: np.ndarray) -> None:
-    off = np.flatnonzero(np.abs(vertices[:, 2]) > 1e-12 * _scale(vertices))
-    if len(off):
-        i = int(off[0])
-        raise PatternError(
-            f"vertices_coords[{i}]: z = {vertices[i, 2]:g}, but a crease pattern must be flat "
-            f"(z = 0); {len(off)} vertices are off the plane"
-        )
-
-
-def _check_unfolded(vertices: np.ndarray, faces: list[list[int]], chosen: bool) -> None:
-    """A foldedForm frame read as a crease pattern must be the unfolded state."""
-    intro = "the frame is a folded form (frame_classes foldedForm), not a crease pattern"
-    if chosen:
-        intro += ", and the file has no creasePattern frame to read instead"
-    off = np.flatnonzero(np.abs(vertices[:, 2]) > 1e-12 * _scale(vertices))
-    if len(off):
-        i = int(off[0])
-        raise PatternError(
-            f"{intro}: vertices_coords[{i}] has z = {vertices[i, 2]:g} "
-            f"({len(off)} vertices are off the plane z = 0)"
-        )
-    for f, face in enumerate(faces):
-        p = vertices[face, :2]
-        area = 0.5 * float(
-            np.dot(p[:, 0], np.roll(p[:, 1], -1)) - np.dot(np.roll(p[:, 0], -1), p[:, 1])
-        )
-        if area < 0:
-            raise PatternError(
-                f"{intro}: faces_vertices[{f}] is clockwise (flipped over by the folding)"
-            )
 
 
 def load_fold(path: str | os.PathLike, frame: int | None = None) -> CreasePattern:
