@@ -1,4 +1,6 @@
-"""Command line: ``origami-jax fold INPUT|--example NAME --out OUT [options]``.
+"""Command line: ``origami-jax fold INPUT|--example NAME --out OUT [options]`` and
+``origami-jax info INPUT`` (counts, pieces, holes, reading warnings, vertices that are not
+flat-foldable; see :mod:`origami_jax.info`).
 
 Runs in float64 unless ``--float32`` is given. With ``--cache`` it keeps compiled solvers in a
 persistent cache (``$XDG_CACHE_HOME/origami_jax/<machine>``, default ``~/.cache/origami_jax``,
@@ -35,10 +37,13 @@ def _parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
     f = sub.add_parser("fold", help="fold a crease pattern and write the folded state")
-    f.add_argument("input", nargs="?", help="a .fold file (default: --example seed_waterbomb)")
+    f.add_argument(
+        "input", nargs="?", help="a .fold or .svg file (default: --example seed_waterbomb)"
+    )
     f.add_argument("--example", choices=EXAMPLES, help="fold a built-in pattern instead")
     f.add_argument(
-        "--out", help="output file: .fold, .obj, .ply, .stl or .vtu (default: <name>-folded.fold)"
+        "--out",
+        help="output file: .fold, .svg, .obj, .ply, .stl or .vtu (default: <name>-folded.fold)",
     )
     f.add_argument("--solver", default="newton", help="newton (default), lbfgs or dynamics")
     f.add_argument("--percent", type=float, default=100.0, help="fold percent (default: 100)")
@@ -52,7 +57,26 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="keep compiled code in a persistent cache (faster next runs; see the module doc)",
     )
+    i = sub.add_parser("info", help="describe a crease pattern: counts, pieces, holes, checks")
+    i.add_argument("input", help="a .fold or .svg file")
     return parser
+
+
+def _info(path: str) -> int:
+    from origami_jax import PatternError, io
+    from origami_jax.info import describe
+
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            pattern = io.load(path)
+    except PatternError as exc:
+        for w in caught:
+            print(f"warning: {w.message}", file=sys.stderr)
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(describe(pattern, [str(w.message) for w in caught]).summary())
+    return 0
 
 
 def _load(args):
@@ -87,6 +111,8 @@ def _machine_key() -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    if args.command == "info":
+        return _info(args.input)
     if not args.float32:
         os.environ.setdefault("JAX_ENABLE_X64", "1")
     import jax

@@ -400,6 +400,7 @@ def test_flat_folded_form_unfolds_to_the_square():
 def test_folded_form_that_does_not_unfold_is_a_clear_error():
     # a closed pyramid of four triangles on a square: the apex vertex closes up
     data = {
+        "file_spec": 1.2,
         "vertices_coords": [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0.5]],
         "faces_vertices": [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]],
     }

@@ -196,6 +196,12 @@ def test_dropped_and_changed_lines_warn(tmp_path):
             SQUARE + '<line x1="0" y1="0" x2="100" y2="100" stroke="red" stroke-opacity="x"/>',
             "<line> 1: stroke-opacity 'x' is not a number",
         ),
+        (
+            SQUARE + '<line id="a" x1="0" y1="0" x2="1OO" y2="100" stroke="red"/>',
+            "<line> number 0 of its kind (id 'a'): x2='1OO' is not a length",
+        ),
+        (SQUARE + '<polygon points="0,0 5,x 9,0" stroke="red"/>', "points='0,0 5,x 9,0'"),
+        (SQUARE + '<path d="M0 0 L5 5 W" stroke="red"/>', "d='M0 0 L5 5 W' is not path data"),
     ],
 )
 def test_bad_drawings_raise_pattern_error_naming_the_element(tmp_path, body, expected):

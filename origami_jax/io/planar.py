@@ -38,6 +38,7 @@ __all__ = ["pattern_from_segments"]
 DEFAULT_TOLERANCE = 1e-6
 # a line end that touches nothing is joined to a line within this many tolerances
 GAP_FACTOR = 10.0
+MAX_COORDINATE = 1e150
 
 
 def _warn(message: str) -> None:
@@ -80,9 +81,14 @@ def pattern_from_segments(
         raise PatternError("segments: starts, ends, assignments, angles and names differ in length")
     if len(p0) == 0:
         raise PatternError(f"{name}: no line segments to build a pattern from")
-    for k in range(len(p0)):
-        if not (np.isfinite(p0[k]).all() and np.isfinite(p1[k]).all()):
-            raise PatternError(f"{names[k]}: non-finite coordinate")
+    # squares of lengths must stay finite: |coordinates| up to 1e150
+    bad = ~(np.abs(np.concatenate([p0, p1], axis=1)) <= MAX_COORDINATE).all(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise PatternError(
+            f"{names[k]}: coordinate {[*p0[k].tolist(), *p1[k].tolist()]} is not finite "
+            f"or beyond {MAX_COORDINATE:g}"
+        )
     points = np.concatenate([p0, p1])
     diagonal = float(np.linalg.norm(points.max(0) - points.min(0)))
     if diagonal == 0.0:
@@ -125,6 +131,8 @@ def pattern_from_segments(
     # 3. faces
     piece_lines = shapely.linestrings(coords[pieces])
     polygons = list(shapely.get_parts(shapely.polygonize(piece_lines)))
+    # faces thinner than the tolerance are slivers of the noding, not paper
+    polygons = [poly for poly in polygons if poly.area > tol * tol]
     if not polygons:
         raise PatternError(f"{name}: the lines enclose no face (is the border closed?)")
     index = {(float(x), float(y)): i for i, (x, y) in enumerate(coords)}
@@ -384,7 +392,9 @@ def _paper_faces(polygons, faces_rings, key_of, piece_letter) -> list[int]:
             piece_letter[key_of[_key(outer[s], outer[s - 1])]] == "B" for s in range(len(outer))
         )
         if all_border:
-            inside = tree.query(shapely.point_on_surface(polygons[f]), predicate="within")
+            with np.errstate(all="ignore"):  # denormal coordinates overflow inside GEOS
+                point = shapely.point_on_surface(polygons[f])
+            inside = tree.query(point, predicate="within")
             if any(int(g) != f for g in inside):
                 continue  # a hole in another face
         paper.append(f)

@@ -30,6 +30,7 @@ from __future__ import annotations
 import colorsys
 import math
 import os
+import re
 import warnings
 import xml.etree.ElementTree as ElementTree
 from pathlib import Path as FilePath
@@ -37,7 +38,7 @@ from pathlib import Path as FilePath
 import numpy as np
 
 from origami_jax.io.fold import atomic_path
-from origami_jax.io.planar import pattern_from_segments
+from origami_jax.io.planar import MAX_COORDINATE, pattern_from_segments
 from origami_jax.pattern import CreasePattern, PatternError, PatternWarning
 
 __all__ = ["load_svg", "save_svg", "to_svg", "stroke_assignment"]
@@ -107,6 +108,7 @@ def load_svg(path: str | os.PathLike, *, tolerance: float = SVG_TOLERANCE) -> Cr
     import svgelements  # imported here: only SVG input needs it
 
     path = FilePath(path)
+    _check_numbers(path)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # svgelements warns on unknown elements
@@ -121,6 +123,45 @@ def load_svg(path: str | os.PathLike, *, tolerance: float = SVG_TOLERANCE) -> Cr
         return _pattern(svg, svgelements, path.stem, tolerance)
     except PatternError as exc:
         raise PatternError(f"{path}: {exc}") from None
+
+
+_NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_LENGTH = re.compile(rf"\s*{_NUMBER}\s*(?:px|pt|pc|mm|cm|in|em|ex|%)?\s*")
+_NUMBER_RE = re.compile(_NUMBER)
+_PATH_DATA = re.compile(r"[MmLlHhVvCcSsQqTtAaZz0-9eE+\-.,\s]*")
+_LENGTH_ATTRIBUTES = ("x", "y", "x1", "y1", "x2", "y2", "width", "height", "cx", "cy", "r")
+_SHAPES = ("line", "rect", "polyline", "polygon", "path", "circle", "ellipse")
+
+
+def _check_numbers(path: FilePath) -> None:
+    """Refuse geometry that is not a number: svgelements would read it as 0 without a word."""
+    try:
+        root = ElementTree.parse(path).getroot()
+    except FileNotFoundError:
+        raise PatternError(f"{path}: no such file") from None
+    except (OSError, ElementTree.ParseError, UnicodeDecodeError) as exc:
+        raise PatternError(f"{path}: cannot be read as SVG ({exc})") from None
+    counts: dict[str, int] = {}
+    for el in root.iter():
+        tag = el.tag.rsplit("}", 1)[-1]
+        if tag not in _SHAPES:
+            continue
+        k = counts.get(tag, 0)
+        counts[tag] = k + 1
+        what = f"{path}: <{tag}> number {k} of its kind" + (
+            f" (id {el.get('id')!r})" if el.get("id") else ""
+        )
+        for key in _LENGTH_ATTRIBUTES:
+            value = el.get(key)
+            if value is not None and not _LENGTH.fullmatch(value):
+                raise PatternError(f"{what}: {key}={value!r} is not a length")
+        points = el.get("points")
+        if points is not None and not all(
+            _NUMBER_RE.fullmatch(t) for t in re.split(r"[\s,]+", points.strip()) if t
+        ):
+            raise PatternError(f"{what}: points={el.get('points')!r} are not numbers")
+        if el.get("d") is not None and not _PATH_DATA.fullmatch(el.get("d")):
+            raise PatternError(f"{what}: d={el.get('d')[:40]!r} is not path data")
 
 
 def _pattern(svg, svgelements, name: str, tolerance: float) -> CreasePattern:
@@ -182,8 +223,8 @@ def _segments(path, what: str) -> list[np.ndarray]:
             pts = np.array([[seg.start.x, seg.start.y], [seg.end.x, seg.end.y]], np.float64)
         else:  # a curve: sampled densely here, thinned in _flatten once the size is known
             pts = np.asarray(seg.npoint(np.linspace(0.0, 1.0, 257)), np.float64)
-        if not np.isfinite(pts).all():
-            raise PatternError(f"{what}: non-finite coordinate")
+        if not (np.abs(pts) <= MAX_COORDINATE).all():
+            raise PatternError(f"{what}: a coordinate is not finite or beyond {MAX_COORDINATE:g}")
         out.append(pts)
     return out
 
