@@ -33,6 +33,8 @@ import numpy as np
 __all__ = ["PatternError", "PatternWarning", "CreasePattern", "Mesh", "ASSIGNMENTS"]
 
 ASSIGNMENTS = "BMVFUCJ"
+# squares of lengths must stay finite in float64: coordinates up to 1e150
+MAX_COORDINATE = 1e150
 _DRIVEN, _FACET, _FREE, _BORDER = "driven", "facet", "free", "border"
 
 
@@ -225,10 +227,11 @@ def _check_vertices(vertices) -> np.ndarray:
         raise PatternError(f"vertices: expected shape (V, 2) or (V, 3), got {v.shape}")
     if len(v) < 3:
         raise PatternError(f"vertices: a pattern needs at least 3 vertices, got {len(v)}")
-    bad = ~np.isfinite(v).all(axis=1)
+    bad = ~(np.abs(v) <= MAX_COORDINATE).all(axis=1)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise PatternError(f"vertex {k}: non-finite coordinate {v[k].tolist()}")
+        what = "non-finite" if not np.isfinite(v[k]).all() else f"beyond {MAX_COORDINATE:g}"
+        raise PatternError(f"vertex {k}: {what} coordinate {v[k].tolist()}")
     if v.shape[1] == 2:
         v = np.concatenate([v, np.zeros((len(v), 1))], axis=1)
     else:

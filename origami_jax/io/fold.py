@@ -90,6 +90,7 @@ import numpy as np
 from origami_jax.io.planar import pattern_from_segments
 from origami_jax.pattern import (
     ASSIGNMENTS,
+    MAX_COORDINATE,
     CreasePattern,
     PatternError,
     PatternWarning,
@@ -532,6 +533,8 @@ def _read_vertices(fr: dict) -> np.ndarray:
             raise PatternError(f"{what}: expected 2 or 3 coordinates, got {len(c)}")
         for j, x in enumerate(c):
             out[i, j] = _float(x, f"{what}[{j}]")
+            if abs(out[i, j]) > MAX_COORDINATE:
+                raise PatternError(f"{what}[{j}]: {out[i, j]:g} is beyond {MAX_COORDINATE:g}")
     return out
 
 

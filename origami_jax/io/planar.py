@@ -31,14 +31,19 @@ from collections.abc import Sequence
 import numpy as np
 import shapely
 
-from origami_jax.pattern import CreasePattern, PatternError, PatternWarning, find_root
+from origami_jax.pattern import (
+    MAX_COORDINATE,
+    CreasePattern,
+    PatternError,
+    PatternWarning,
+    find_root,
+)
 
 __all__ = ["pattern_from_segments"]
 
 DEFAULT_TOLERANCE = 1e-6
 # a line end that touches nothing is joined to a line within this many tolerances
 GAP_FACTOR = 10.0
-MAX_COORDINATE = 1e150
 
 
 def _warn(message: str) -> None:
