@@ -244,6 +244,8 @@ def fold(
         raise PatternError(f"percent: must be finite, got {percent}")
     if int(max_iter) < 0:
         raise ValueError(f"max_iter must be >= 0, got {max_iter}")
+    if record_every is not None and int(record_every) < 1:
+        raise ValueError(f"record_every must be >= 1, got {record_every}")
     solver_obj = get_solver(solver)
     dtype = jnp.dtype(dtype or jnp.result_type(float))
     if dtype == jnp.float64 and not jax.config.jax_enable_x64:
@@ -277,8 +279,6 @@ def fold(
     state, m, x, angles = advance(state, problem, jnp.int32(0))
     samples = [_sample(state, m, 0.0)]
     bar = ProgressBar(max_iter) if progress else None
-    if record_every is not None and int(record_every) < 1:
-        raise ValueError(f"record_every must be >= 1, got {record_every}")
     chunk, iterations = record_every or 1, 0
     out_of_time = False
     while int(state.status) == Status.RUNNING and iterations < max_iter:

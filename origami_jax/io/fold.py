@@ -74,6 +74,7 @@ existing target is left untouched.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import json
 import math
@@ -456,9 +457,9 @@ def _develop(vertices: np.ndarray, faces: list[list[int]]) -> np.ndarray:
         shift = np.array([x_offset - pts[:, 0].min(), -pts[:, 1].min()])
         _place(flat, faces[root], pts + shift, root, tol)
         placed_face[root] = True
-        queue = [root]
+        queue = collections.deque([root])
         while queue:
-            f = queue.pop(0)
+            f = queue.popleft()
             face = faces[f]
             for a, b in zip(face, face[1:] + face[:1], strict=True):
                 for g in by_edge[(min(a, b), max(a, b))]:

@@ -333,14 +333,12 @@ def _sources(coords, pieces, lines, tol) -> list[list[int]]:
     tree = shapely.STRtree(lines)
     pi, si = tree.query(shapely.points(0.5 * (a + b)), predicate="dwithin", distance=2 * tol)
     out: list[list[int]] = [[] for _ in range(len(pieces))]
-    ends = shapely.points(np.concatenate([a, b]))
-    n = len(pieces)
-    for p, s in zip(pi.tolist(), si.tolist(), strict=True):
-        # both ends of the piece on the segment: it lies along it, not across it
-        if shapely.distance(ends[p], lines[s]) <= 2 * tol and (
-            shapely.distance(ends[p + n], lines[s]) <= 2 * tol
-        ):
-            out[p].append(s)
+    # both ends of the piece on the segment: it lies along it, not across it
+    along = (shapely.distance(shapely.points(a[pi]), lines[si]) <= 2 * tol) & (
+        shapely.distance(shapely.points(b[pi]), lines[si]) <= 2 * tol
+    )
+    for p, s in zip(pi[along].tolist(), si[along].tolist(), strict=True):
+        out[p].append(s)
     # a piece shorter than the tolerance can touch a crossing segment at both ends: where
     # candidates disagree, keep those along the piece (angle below about 6 degrees)
     seg = shapely.get_coordinates(lines).reshape(-1, 2, 2)

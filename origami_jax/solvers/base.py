@@ -101,6 +101,17 @@ def next_status(converged: Array, finite: Array, stalled: Array) -> Array:
     ).astype(jnp.int32)
 
 
+def run_steps(step, state, steps: Array):
+    """``state = step(state)`` in one ``lax.while_loop``, at most ``steps`` times, until the
+    state's status is not RUNNING (the ``run`` of every solver)."""
+    last = state.iteration + steps
+
+    def cond(s):
+        return (s.status == Status.RUNNING) & (s.iteration < last)
+
+    return jax.lax.while_loop(cond, step, state)
+
+
 class Solver(Protocol):
     name: str
 

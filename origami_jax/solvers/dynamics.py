@@ -55,6 +55,7 @@ from origami_jax.solvers.base import (
     next_status,
     objective,
     positions,
+    run_steps,
 )
 
 __all__ = ["Dynamics", "DynamicsState", "max_eigenvalue", "lumped_mass", "origami_simulator"]
@@ -342,12 +343,7 @@ class Dynamics:
         )
 
     def run(self, state: DynamicsState, problem: Problem, steps: Array) -> DynamicsState:
-        last = state.iteration + steps
-
-        def cond(s):
-            return (s.status == Status.RUNNING) & (s.iteration < last)
-
-        return jax.lax.while_loop(cond, lambda s: self.step(s, problem), state)
+        return run_steps(lambda s: self.step(s, problem), state, steps)
 
     # jax-md style names
     def init_fn(self, problem: Problem) -> DynamicsState:

@@ -25,6 +25,7 @@ from origami_jax.solvers.base import (
     next_status,
     objective,
     positions,
+    run_steps,
 )
 
 __all__ = ["Lbfgs", "LbfgsState"]
@@ -103,10 +104,6 @@ class Lbfgs:
 
     def run(self, state: LbfgsState, problem: Problem, steps: Array) -> LbfgsState:
         opt = self._optimizer(problem.max_step)
-        last = state.iteration + steps
-
-        def cond(s: LbfgsState):
-            return (s.status == Status.RUNNING) & (s.iteration < last)
 
         def body(s: LbfgsState) -> LbfgsState:
             def f(u):
@@ -155,4 +152,4 @@ class Lbfgs:
                 progress=progress,
             )
 
-        return jax.lax.while_loop(cond, body, state)
+        return run_steps(body, state, steps)

@@ -52,6 +52,7 @@ from origami_jax.solvers.base import (
     next_status,
     objective,
     positions,
+    run_steps,
 )
 
 __all__ = ["Newton", "NewtonState", "HessianLayout", "hessian_layout", "element_hessians"]
@@ -455,9 +456,4 @@ class Newton:
         )
 
     def run(self, state: NewtonState, problem: Problem, steps: Array) -> NewtonState:
-        last = state.iteration + steps
-
-        def cond(s):
-            return (s.status == Status.RUNNING) & (s.iteration < last)
-
-        return jax.lax.while_loop(cond, lambda s: self.step(s, problem), state)
+        return run_steps(lambda s: self.step(s, problem), state, steps)
