@@ -3,13 +3,17 @@
     python benchmarks/run.py            # all cases, results in benchmarks/results/
     python benchmarks/run.py --quick    # small cases only (a smoke run)
     python benchmarks/run.py --part stiffness   # only the stiffness sweep
+    python benchmarks/run.py --part files       # every file under ../shared/patterns
+    python benchmarks/run.py --part batch       # fold_batch against a loop (benchmarks/batch.py)
 
 Cases: the seed's scene, Miura-ori 10 x 10, 30 x 30 and 100 x 100, a Yoshimura, a Kresling, and
 every FOLD file under ../shared/patterns that loads (skipped when that folder is absent); the
 solvers Newton, L-BFGS and FIRE dynamics, plus Origami Simulator's scheme (semi-implicit Euler,
 bar damping, its time step) on the Miura-ori up to 30 x 30 for comparison. A second part
 sweeps the axial : crease stiffness ratio from 1 to 1e8 on a 10 x 10 Miura-ori (files
-``stiffness_*``). Each solve is capped at ``--max-time`` seconds (120; 30 in the sweep).
+``stiffness_*``). A third loads every SVG and FOLD file under ../shared/patterns and folds it
+with the defaults (Newton; files ``files_*``). Each solve is capped at ``--max-time`` seconds
+(120; 30 in the sweep, 60 for the files).
 
 Compile time comes from a first call that compiles and runs no iteration; the wall time and
 the (wall time, error) series from a second call, compile excluded. Newton's series is taken
@@ -82,10 +86,31 @@ def stiffness_cases(quick: bool):
         yield f"miura_10x10_ratio_{ratio:.0e}", cp, {"stiffness": stiffness}, exact, SOLVERS
 
 
+def file_cases(quick: bool):
+    """Every SVG and FOLD file under ../shared/patterns, with the defaults (Newton)."""
+    if not SHARED.is_dir():
+        return
+    for path in sorted(SHARED.rglob("*")):
+        if path.suffix.lower() not in (".svg", ".fold"):
+            continue
+        name = str(path.relative_to(SHARED))
+        t0 = time.perf_counter()
+        try:
+            cp = io.load(path)
+        except PatternError as err:
+            print(f"{name}: does not load: {err}", file=sys.stderr)
+            continue
+        yield name, cp, {"load_time_s": time.perf_counter() - t0}, None, ("newton",)
+        if quick:
+            return
+
+
 PARTS = {
     # part: (cases, file prefix, plots, seconds per solve unless --max-time)
     "main": (cases, "", True, 120.0),
     "stiffness": (stiffness_cases, "stiffness_", False, 30.0),
+    "files": (file_cases, "files_", False, 60.0),
+    "batch": (None, "batch_", True, None),  # benchmarks/batch.py
 }
 
 
@@ -124,6 +149,20 @@ def main(argv=None) -> int:
         if args.part not in ("all", part):
             continue
         max_time = max_time if args.max_time is None else args.max_time
+        if part == "batch":
+            sys.path.insert(0, str(Path(__file__).parent))
+            import batch
+
+            batch.main(out, quick=args.quick)
+            continue
+        if part == "files":
+            summary = run_files(make_cases(args.quick), max_time)
+            if summary:
+                write_csv(out / f"{prefix}summary.csv", summary)
+                table = files_markdown(summary, machine)
+                (out / f"{prefix}results.md").write_text(table)
+                print(table)
+            continue
         summary, history_rows, plots = run_cases(make_cases(args.quick), args, only, max_time)
         write_csv(out / f"{prefix}summary.csv", summary)
         write_csv(out / f"{prefix}history.csv", history_rows)
@@ -193,6 +232,68 @@ def run_cases(case_list, args, only, max_time: float) -> tuple[list, list, dict]
             )
 
     return summary, history_rows, plots
+
+
+def run_files(case_list, max_time: float) -> list[dict]:
+    """Fold each file once with the defaults (compile timed apart): one summary row each."""
+    rows = []
+    for name, cp, extra, _, _ in case_list:
+        first = fold(cp, max_iter=0)
+        r = fold(cp, max_time=max_time)
+        rows.append(
+            {
+                "file": name,
+                "vertices": cp.num_vertices,
+                "faces": len(cp.faces),
+                "mesh_vertices": cp.mesh.num_vertices,
+                "pre_folded_start": cp.start is not None,
+                "load_time_s": extra["load_time_s"],
+                "compile_time_s": first.compile_time,
+                "wall_time_s": r.wall_time,
+                "iterations": r.iterations,
+                "status": r.status.name,
+                "grad_norm_rel": r.grad_norm_rel,
+                "fold_angle_error_max": r.fold_angle_error_max,
+                "strain_max": r.strain_max,
+                "through_pi": len(r.through_pi),
+            }
+        )
+        print(f"{name:45s} {r.iterations:6d} it  {r.wall_time:7.2f} s  {r.reason}", flush=True)
+    return rows
+
+
+def files_markdown(rows: list[dict], machine: str) -> str:
+    head = ["file", "vertices", "faces", "load (s)", "compile (s)", "fold (s)", "iterations"]
+    head += ["status", "grad_norm_rel", "fold_angle_error_max (rad)", "strain_max"]
+    head += ["creases through pi", "pre-folded start"]
+    lines = [
+        f"Measured {time.strftime('%Y-%m-%d')} on {machine}; float64, defaults (Newton, "
+        "stiffness axial 1 / facet 0.02 / crease 0.001, full fold). Vertices and faces of the "
+        "crease pattern as loaded; 'creases through pi': mesh edges whose unwrapped fold angle "
+        "passed +-pi (paper through paper); 'pre-folded start': a folded form, unfolded, folded "
+        "from its own positions.",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    for r in rows:
+        cells = [
+            r["file"],
+            str(r["vertices"]),
+            str(r["faces"]),
+            f"{r['load_time_s']:.2f}",
+            f"{r['compile_time_s']:.2f}",
+            f"{r['wall_time_s']:.3g}",
+            str(r["iterations"]),
+            r["status"].lower().replace("_", " "),
+            f"{r['grad_norm_rel']:.2g}",
+            f"{r['fold_angle_error_max']:.3g}",
+            f"{r['strain_max']:.2g}",
+            str(r["through_pi"]),
+            "yes" if r["pre_folded_start"] else "",
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:

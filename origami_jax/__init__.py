@@ -12,6 +12,7 @@ Importing the package changes no global JAX setting; enable float64 yourself wit
 """
 
 from origami_jax import patterns
+from origami_jax.batch import fold_batch
 from origami_jax.energy import FoldParams, Stiffness, build_energy, energy
 from origami_jax.fold import FoldResult, fold
 from origami_jax.io import from_fold_dict, load, save, to_fold_dict
@@ -29,6 +30,7 @@ __all__ = [
     "energy",
     "FoldResult",
     "fold",
+    "fold_batch",
     "load",
     "save",
     "from_fold_dict",

@@ -49,7 +49,9 @@ __all__ = [
     "FoldParams",
     "hinge_goals",
     "make_structure",
+    "structure_arrays",
     "make_params",
+    "param_arrays",
     "energy",
     "build_energy",
     "initial_reference",
@@ -114,17 +116,43 @@ class FoldParams(NamedTuple):
     stiffness: Stiffness
 
 
-def make_structure(mesh: Mesh) -> Structure:
-    """Index arrays of the scene from a triangulated :class:`Mesh`."""
+def structure_arrays(mesh: Mesh) -> Structure:
+    """The index arrays of :func:`make_structure` as NumPy arrays (host side, no device copy)."""
     driven, facet, free = (mesh.edges_with_role(r) for r in ("driven", "facet", "free"))
     torsion = np.concatenate([driven, facet])
     return Structure(
-        bars=jnp.asarray(mesh.edges, jnp.int32),
-        hinges=jnp.asarray(mesh.hinges[torsion].reshape(-1, 4), jnp.int32),
-        hinge_bars=jnp.asarray(torsion, jnp.int32),
-        free=jnp.asarray(mesh.hinges[free].reshape(-1, 4), jnp.int32),
-        free_bars=jnp.asarray(free, jnp.int32),
+        bars=np.asarray(mesh.edges, np.int32),
+        hinges=np.asarray(mesh.hinges[torsion].reshape(-1, 4), np.int32),
+        hinge_bars=np.asarray(torsion, np.int32),
+        free=np.asarray(mesh.hinges[free].reshape(-1, 4), np.int32),
+        free_bars=np.asarray(free, np.int32),
         num_creases=len(driven),
+    )
+
+
+def make_structure(mesh: Mesh) -> Structure:
+    """Index arrays of the scene from a triangulated :class:`Mesh`."""
+    return jax.tree.map(jnp.asarray, structure_arrays(mesh))
+
+
+def param_arrays(
+    pattern: CreasePattern, percent: float = 1.0, stiffness: Stiffness | dict | None = None
+) -> FoldParams:
+    """The parameters of :func:`make_params` as float64 NumPy arrays (host side)."""
+    mesh = pattern.mesh
+    if stiffness is None:
+        stiffness = Stiffness()
+    elif isinstance(stiffness, dict):
+        stiffness = Stiffness(**stiffness)
+    rest = np.linalg.norm(mesh.vertices[mesh.edges[:, 1]] - mesh.vertices[mesh.edges[:, 0]], axis=1)
+    return FoldParams(
+        target=np.asarray(mesh.target[mesh.edges_with_role("driven")], np.float64),
+        percent=np.asarray(percent, np.float64),
+        rest_length=rest,
+        # a traced stiffness (inside jit or grad) stays a JAX value
+        stiffness=Stiffness(
+            *(k if isinstance(k, jax.Array) else np.asarray(k, np.float64) for k in stiffness)
+        ),
     )
 
 
@@ -135,20 +163,8 @@ def make_params(
     dtype=None,
 ) -> FoldParams:
     """Default parameters of a pattern: its targets, rest lengths and the given stiffness."""
-    mesh = pattern.mesh
     dtype = dtype or jnp.result_type(float)
-    if stiffness is None:
-        stiffness = Stiffness()
-    elif isinstance(stiffness, dict):
-        stiffness = Stiffness(**stiffness)
-    rest = np.linalg.norm(mesh.vertices[mesh.edges[:, 1]] - mesh.vertices[mesh.edges[:, 0]], axis=1)
-    target = mesh.target[mesh.edges_with_role("driven")]
-    return FoldParams(
-        target=jnp.asarray(target, dtype),
-        percent=jnp.asarray(percent, dtype),
-        rest_length=jnp.asarray(rest, dtype),
-        stiffness=Stiffness(*(jnp.asarray(s, dtype) for s in stiffness)),
-    )
+    return jax.tree.map(lambda a: jnp.asarray(a, dtype), param_arrays(pattern, percent, stiffness))
 
 
 def hinge_goals(structure: Structure, params: FoldParams) -> tuple[Array, Array]:

@@ -147,14 +147,11 @@ def _signature(tree) -> tuple:
     return treedef, tuple((np.shape(x), jnp.result_type(x).name) for x in leaves)
 
 
-def _compiled(solver: Solver, problem, num_edges: int):
-    """(init, advance) compiled for this solver and these shapes; and the compile time."""
-    key = (solver, _signature(problem), num_edges)
-    if key in _CACHE:
-        return _CACHE[key], 0.0
+def advance_fn(solver: Solver, num_edges: int):
+    """``advance(state, problem, steps)``: up to ``steps`` iterations; then the state, the metrics,
+    positions and per-edge fold angles (pure; :func:`fold` jits it, ``fold_batch`` vmaps it)."""
 
     def advance(state, problem, steps):
-        """Up to ``steps`` iterations; then positions, per-edge fold angles and the metrics."""
         state = solver.run(state, problem, steps)
         x = positions(problem, state.u)
         m = position_metrics(x, problem.structure, problem.params, state.reference)
@@ -162,14 +159,61 @@ def _compiled(solver: Solver, problem, num_edges: int):
         angles = edge_fold_angles(x, problem.structure, state.reference, num_edges)
         return state, m, x, angles
 
+    return advance
+
+
+def compiled(solver: Solver, problem, num_edges: int, wrap=None, key=()):
+    """``(init, advance)`` compiled for this solver and these shapes (cached), and the compile
+    time (0 when cached). ``wrap(fn, in_axes)`` transforms both before ``jit`` (``fold_batch``:
+    vmap and sharding; ``key`` tells its variants apart)."""
+    cache_key = (solver, _signature(problem), num_edges, key)
+    if cache_key in _CACHE:
+        return _CACHE[cache_key], 0.0
+    init, advance = solver.init, advance_fn(solver, num_edges)
+    if wrap is not None:
+        init, advance = wrap(init, (0,)), wrap(advance, (0, 0, None))
     t0 = time.perf_counter()
-    init = jax.jit(solver.init).lower(problem).compile()
-    state_shape = jax.eval_shape(solver.init, problem)
+    init_c = jax.jit(init).lower(problem).compile()
+    state_shape = jax.eval_shape(init, problem)
     steps = jax.ShapeDtypeStruct((), jnp.int32)
-    adv = jax.jit(advance).lower(state_shape, problem, steps).compile()
+    advance_c = jax.jit(advance).lower(state_shape, problem, steps).compile()
     compile_time = time.perf_counter() - t0
-    _CACHE[key] = (init, adv)
-    return _CACHE[key], compile_time
+    _CACHE[cache_key] = (init_c, advance_c)
+    return _CACHE[cache_key], compile_time
+
+
+def drive(solver, init, advance, problem, max_iter: int, max_time, record_every, on_chunk=None):
+    """The host loop of a solve: compiled chunks of iterations until no problem is RUNNING, the
+    iteration limit or ``max_time``. Chunks grow geometrically to about a tenth of a second
+    (or stay at ``record_every``); a sample of the metrics is kept after each. Works for one
+    problem and for a batch (statuses and metrics then have a leading batch axis).
+
+    Returns ``(state, metrics, positions, angles, samples, out_of_time)``.
+    """
+    t0 = time.perf_counter()
+    state = init(problem)
+    check_start(solver, state)
+    state, m, x, angles = advance(state, problem, jnp.int32(0))
+    samples = [_sample(state, m, 0.0)]
+    chunk, iterations = record_every or 1, 0
+    out_of_time = False
+    while np.any(np.asarray(state.status) == Status.RUNNING) and iterations < max_iter:
+        if max_time is not None and time.perf_counter() - t0 >= max_time:
+            out_of_time = True
+            break
+        steps = min(chunk, max_iter - iterations)
+        t_chunk = time.perf_counter()
+        state, m, x, angles = advance(state, problem, jnp.int32(steps))
+        now = time.perf_counter()
+        samples.append(_sample(state, m, now - t0))
+        iterations = int(np.max(samples[-1]["iteration"]))
+        if on_chunk is not None:
+            on_chunk(iterations, samples[-1])
+        per_step = (now - t_chunk) / max(steps, 1)
+        chunk = max(1, min(2 * chunk, int(0.1 / max(per_step, 1e-9))))
+        if record_every is not None:
+            chunk = record_every
+    return state, m, x, angles, samples, out_of_time
 
 
 def _reason(status: Status, m: dict, tol: float, iterations: int) -> str:
@@ -271,34 +315,18 @@ def fold(
     problem = make_problem(mesh, make_structure(mesh), params, start, tol)
     problem = prepare(solver_obj, problem, mesh)
 
-    (init, advance), compile_time = _compiled(solver_obj, problem, mesh.num_edges)
-
+    (init, advance), compile_time = compiled(solver_obj, problem, mesh.num_edges)
     t0 = time.perf_counter()
-    state = init(problem)
-    check_start(solver_obj, state)
-    state, m, x, angles = advance(state, problem, jnp.int32(0))
-    samples = [_sample(state, m, 0.0)]
     bar = ProgressBar(max_iter) if progress else None
-    chunk, iterations = record_every or 1, 0
-    out_of_time = False
-    while int(state.status) == Status.RUNNING and iterations < max_iter:
-        if max_time is not None and time.perf_counter() - t0 >= max_time:
-            out_of_time = True
-            break
-        steps = min(chunk, max_iter - iterations)
-        t_chunk = time.perf_counter()
-        state, m, x, angles = advance(state, problem, jnp.int32(steps))
-        m = jax.device_get(m)
-        now = time.perf_counter()
-        iterations = int(state.iteration)
-        samples.append(_sample(state, m, now - t0))
+
+    def on_chunk(iterations, sample):
         if bar is not None:
-            bar.update(iterations, f"err {float(m['fold_angle_error_max']):.2e} rad")
-        # grow chunks geometrically, then keep each to about a tenth of a second
-        per_step = (now - t_chunk) / max(steps, 1)
-        chunk = max(1, min(2 * chunk, int(0.1 / max(per_step, 1e-9))))
-        if record_every is not None:
-            chunk = record_every
+            bar.update(iterations, f"err {float(sample['fold_angle_error_max']):.2e} rad")
+
+    state, m, x, angles, samples, out_of_time = drive(
+        solver_obj, init, advance, problem, max_iter, max_time, record_every, on_chunk
+    )
+    iterations = int(state.iteration)
     x, angles = jax.device_get((x, angles))
     wall_time = time.perf_counter() - t0
     if bar is not None:
@@ -312,7 +340,7 @@ def fold(
     shape_err = None
     if reference_positions is not None:
         shape_err = shape_error(x, reference_positions, pattern.diameter)
-    history = {k: np.array([s[k] for s in samples]) for k in HISTORY_FIELDS}
+    history = history_of(samples)
     return FoldResult(
         pattern=pattern,
         positions=x,
@@ -333,9 +361,19 @@ def fold(
 
 
 def _sample(state, m, t: float) -> dict:
-    out = {
-        k: float(m[k]) for k in ("fold_angle_error_max", "strain_max", "energy", "grad_norm_rel")
-    }
-    out["iteration"] = int(state.iteration)
+    """The metrics after a chunk as host arrays (scalars, or (B,) in a batch)."""
+    keys = ("fold_angle_error_max", "strain_max", "energy", "grad_norm_rel")
+    out = jax.device_get({k: m[k] for k in keys})
+    out["iteration"] = np.asarray(state.iteration)
     out["wall_time"] = t
     return out
+
+
+def history_of(samples: list[dict], member: int | None = None) -> dict[str, np.ndarray]:
+    """The ``history`` arrays of one solve from the samples of :func:`drive` (``member``: its
+    index in a batch)."""
+
+    def pick(v):
+        return v if member is None or np.ndim(v) == 0 else v[member]
+
+    return {k: np.array([float(pick(s[k])) for s in samples]) for k in HISTORY_FIELDS}

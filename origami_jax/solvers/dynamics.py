@@ -186,10 +186,11 @@ class Dynamics:
 
     def check_start(self, state: DynamicsState) -> None:
         """Refuse a user's time step above the stability limit (host side, after ``init``)."""
-        if self.dt is not None and self.dt > float(state.dt_stable):
+        limit = float(np.min(np.asarray(state.dt_stable)))  # the smallest one of a batch
+        if self.dt is not None and self.dt > limit:
             raise ValueError(
                 f"dt = {self.dt:.3g} exceeds the stability limit 2 / sqrt(lambda_max) = "
-                f"{float(state.dt_stable):.3g} of this scene (leave dt=None to choose it)"
+                f"{limit:.3g} of this scene (leave dt=None to choose it)"
             )
 
     # -- pure --------------------------------------------------------------------------------

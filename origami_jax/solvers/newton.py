@@ -43,7 +43,7 @@ import scipy.sparse.linalg as spla
 from jax import Array
 
 from origami_jax.energy import Structure, hinge_goals, initial_reference
-from origami_jax.geometry import dihedral_angles, fold_angles
+from origami_jax.geometry import bar_lengths, dihedral_angles, fold_angles
 from origami_jax.pattern import Mesh
 from origami_jax.solvers.base import (
     Problem,
@@ -55,7 +55,14 @@ from origami_jax.solvers.base import (
     run_steps,
 )
 
-__all__ = ["Newton", "NewtonState", "HessianLayout", "hessian_layout", "element_hessians"]
+__all__ = [
+    "Newton",
+    "NewtonState",
+    "HessianLayout",
+    "hessian_layout",
+    "layout_arrays",
+    "element_hessians",
+]
 
 
 @functools.partial(
@@ -127,14 +134,32 @@ _LAYOUTS: dict = {}
 
 
 def hessian_layout(mesh: Mesh, structure: Structure, sparse: bool) -> HessianLayout:
-    """The assembly layout of a mesh's Hessian (cached per mesh)."""
+    """The assembly layout of a mesh's Hessian (cached per mesh; device arrays)."""
     key = (id(mesh), sparse)
     hit = _LAYOUTS.get(key)
     if hit is not None and hit[0]() is mesh:
         return hit[1]
     bars = np.asarray(structure.bars)
     hinges = np.asarray(structure.hinges)
-    v = mesh.num_vertices
+    vertex_order = None
+    if sparse:
+        elements = [bars] + ([hinges] if len(hinges) else [])
+        vr = np.concatenate([np.repeat(e, e.shape[1], axis=1).ravel() for e in elements])
+        vc = np.concatenate([np.tile(e, (1, e.shape[1])).ravel() for e in elements])
+        v = mesh.num_vertices
+        adjacency = sp.csr_matrix((np.ones(len(vr)), (vr, vc)), shape=(v, v))
+        vertex_order = nested_dissection(mesh.vertices[:, :2], adjacency)
+    layout = jax.tree.map(jnp.asarray, layout_arrays(bars, hinges, mesh.num_vertices, vertex_order))
+    _LAYOUTS[key] = (weakref.ref(mesh), layout)
+    return layout
+
+
+def layout_arrays(
+    bars: np.ndarray, hinges: np.ndarray, num_vertices: int, vertex_order: np.ndarray | None
+) -> HessianLayout:
+    """A :class:`HessianLayout` of NumPy arrays: sparse in ``vertex_order`` when one is given,
+    else dense (slots index the flat 3V x 3V matrix)."""
+    v = num_vertices
     n = 3 * v
     blocks = [_element_dofs(bars)]
     if len(hinges):
@@ -144,12 +169,8 @@ def hessian_layout(mesh: Mesh, structure: Structure, sparse: bool) -> HessianLay
     diag = np.arange(v)[:, None, None] * 3 + np.arange(3)
     diag_r = np.broadcast_to(diag, (v, 3, 3)).ravel()
     diag_c = np.broadcast_to(diag.transpose(0, 2, 1), (v, 3, 3)).ravel()
+    sparse = vertex_order is not None
     if sparse:
-        elements = [bars] + ([hinges] if len(hinges) else [])
-        vr = np.concatenate([np.repeat(e, e.shape[1], axis=1).ravel() for e in elements])
-        vc = np.concatenate([np.tile(e, (1, e.shape[1])).ravel() for e in elements])
-        adjacency = sp.csr_matrix((np.ones(len(vr)), (vr, vc)), shape=(v, v))
-        vertex_order = nested_dissection(mesh.vertices[:, :2], adjacency)
         rank = np.empty(v, np.int64)
         rank[vertex_order] = np.arange(v)
         order = (rank[:, None] * 3 + np.arange(3)).ravel()
@@ -163,15 +184,13 @@ def hessian_layout(mesh: Mesh, structure: Structure, sparse: bool) -> HessianLay
     else:
         slot, indptr, indices = keys, np.zeros(0, np.int32), np.zeros(0, np.int32)
     m = len(rows)
-    layout = HessianLayout(
-        order=jnp.asarray(order, jnp.int32),
-        slot=jnp.asarray(slot[:m], jnp.int32),
-        diag_blocks=jnp.asarray(slot[m:].reshape(v, 3, 3), jnp.int32),
-        indptr=jnp.asarray(indptr),
-        indices=jnp.asarray(indices),
+    return HessianLayout(
+        order=order.astype(np.int32),
+        slot=slot[:m].astype(np.int32),
+        diag_blocks=slot[m:].reshape(v, 3, 3).astype(np.int32),
+        indptr=indptr,
+        indices=indices,
     )
-    _LAYOUTS[key] = (weakref.ref(mesh), layout)
-    return layout
 
 
 def _hinge_angle_derivatives(p: Array, reference: Array) -> tuple[Array, Array, Array]:
@@ -238,6 +257,23 @@ def _gauge_blocks(data: Array, structure: Structure, problem: Problem) -> Array:
         out.append(block.reshape(-1))
         start += size
     return jnp.concatenate(out)
+
+
+def energy_noise(x: Array, problem: Problem, reference: Array, value: Array) -> Array:
+    """How much the computed energy can move by rounding alone near ``x``: 16 eps times the
+    energy plus each element's force times its length (bars) or moment (hinges). In a strained
+    equilibrium the element forces are far larger than the energy's own size suggests; below
+    this level an Armijo test compares rounding errors, so it accepts any change within it."""
+    structure, params = problem.structure, problem.params
+    eps = jnp.finfo(x.dtype).eps
+    l0 = params.rest_length
+    length = bar_lengths(x, structure.bars)
+    work = jnp.sum(params.stiffness.axial / l0 * jnp.abs(length - l0) * length)
+    if structure.hinges.shape[0]:
+        goal, stiffness = hinge_goals(structure, params)
+        rho = fold_angles(x, structure.hinges, reference)
+        work += jnp.sum(stiffness * l0[structure.hinge_bars] * jnp.abs(rho - goal))
+    return 16 * eps * (jnp.abs(value) + work)
 
 
 def _host_sparse_solve(indptr, indices, data, rhs):
@@ -389,13 +425,14 @@ class Newton:
         step = step * limit
         slope = jnp.vdot(s.grad, step)
         ok = ok & (slope < 0)
-        eps = jnp.finfo(s.u.dtype).eps
 
         def value_at(alpha):
             return objective(s.u + alpha * step, problem, s.reference)
 
+        noise = energy_noise(positions(problem, s.u), problem, s.reference, s.energy)
+
         def sufficient(alpha, value):
-            bound = s.energy + 1e-4 * alpha * slope + 8 * eps * jnp.abs(s.energy)
+            bound = s.energy + 1e-4 * alpha * slope + noise
             return jnp.isfinite(value) & (value <= bound)
 
         def cond(c):

@@ -1,0 +1,202 @@
+"""Batch folding: folds per second of fold_batch against a Python loop of fold(), and the
+compile count of a stream of patterns of random sizes.
+
+    python benchmarks/run.py --part batch     # (or: python benchmarks/batch.py)
+
+Problems: 1,024 Miura-ori 4 x 4 with random sector angles (50 to 80 degrees) and fold angles
+(0.3 to 2.5 rad), and 1,024 waterbomb tessellations 2 x 2 with random fold angles (0.3 to 2.5
+rad). Each solver folds the whole set with one ``fold_batch`` call (after a first call that
+compiles; compile time reported apart) and a sample of 64 of them one by one with ``fold``
+(compiled beforehand); the ratio is folds per second of the batch over those of the loop,
+measured in the same run. The stream: 100 patterns of random kinds and sizes, each folded by
+its own ``fold_batch`` call, as they would arrive one at a time; we count the compilations.
+Writes ``batch_summary.csv``, ``batch_results.md`` and ``batch_throughput.png``.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("JAX_ENABLE_X64", "1")
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+
+from origami_jax import fold, fold_batch, patterns  # noqa: E402
+from origami_jax.batch import bucket, compile_count, problem_sizes  # noqa: E402
+
+SOLVERS = ("newton", "lbfgs", "dynamics")
+
+
+def problem_sets(n: int, seed: int = 0) -> dict:
+    rng = np.random.default_rng(seed)
+    miura = [
+        patterns.miura_ori(
+            4,
+            4,
+            sector_angle=np.radians(rng.uniform(50, 80)),
+            fold_angle=rng.uniform(0.3, 2.5),
+        )
+        for _ in range(n)
+    ]
+    bombs = [patterns.waterbomb(2, 2, fold_angle=rng.uniform(0.3, 2.5)) for _ in range(n)]
+    return {"miura_4x4": miura, "waterbomb_2x2": bombs}
+
+
+def stream(n: int, seed: int = 1) -> list:
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        if rng.random() < 0.5:
+            nx, ny = rng.integers(2, 9, size=2)
+            out.append(patterns.miura_ori(int(nx), int(ny), fold_angle=rng.uniform(0.3, 2.5)))
+        else:
+            nn, mm = rng.integers(1, 4, size=2)
+            out.append(patterns.waterbomb(int(nn), int(mm), fold_angle=rng.uniform(0.3, 2.5)))
+    return out
+
+
+def throughput(cps: list, solver: str, loop_sample: int) -> dict:
+    first = fold_batch(cps[:1], solver=solver, progress=False)  # compiles the B = 1 shape
+    t0 = time.perf_counter()
+    warm = fold_batch(cps, solver=solver, progress=False)  # compiles the chunk shape
+    first_call = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    results = fold_batch(cps, solver=solver, progress=False)
+    batch_time = time.perf_counter() - t0
+    compile_time = max(r.compile_time for r in warm)
+    fold(cps[0], solver=solver)  # compile the single solve
+    t0 = time.perf_counter()
+    singles = [fold(cp, solver=solver) for cp in cps[:loop_sample]]
+    loop_time = (time.perf_counter() - t0) / loop_sample
+    diff = max(
+        float(np.max(np.abs(r.positions - s.positions)) / cp.diameter)
+        for r, s, cp in zip(results, singles, cps, strict=False)
+    )
+    del first
+    return {
+        "solver": solver,
+        "problems": len(cps),
+        "padded_vertices": bucket(problem_sizes(cps[0])).vertices,
+        "converged": sum(r.converged for r in results),
+        "mean_iterations": float(np.mean([r.iterations for r in results])),
+        "compile_time_s": compile_time,
+        "first_call_s": first_call,
+        "batch_time_s": batch_time,
+        "batch_folds_per_s": len(cps) / batch_time,
+        "loop_folds_per_s": 1.0 / loop_time,
+        "speedup": loop_time * len(cps) / batch_time,
+        "max_position_diff_vs_single": diff,
+        "max_fold_angle_error": max(r.fold_angle_error_max for r in results),
+    }
+
+
+def main(out: Path, quick: bool = False) -> list[dict]:
+    n = 64 if quick else 1024
+    rows = []
+    for name, cps in problem_sets(n).items():
+        for solver in SOLVERS:
+            row = {"set": name, **throughput(cps, solver, 16 if quick else 64)}
+            rows.append(row)
+            print(
+                f"{name:14s} {solver:9s} batch {row['batch_folds_per_s']:8.1f} folds/s  loop "
+                f"{row['loop_folds_per_s']:7.1f} folds/s  x{row['speedup']:.1f}  "
+                f"{row['converged']}/{n} converged  compile {row['compile_time_s']:.1f} s",
+                flush=True,
+            )
+    before = compile_count()
+    patterns_stream = stream(20 if quick else 100)
+    t0 = time.perf_counter()
+    for cp in patterns_stream:
+        fold_batch(cp, progress=False)
+    stream_time = time.perf_counter() - t0
+    compiles = compile_count() - before
+    buckets = len({bucket(problem_sizes(cp)) for cp in patterns_stream})
+    vertex_counts = [cp.mesh.num_vertices for cp in patterns_stream]
+    rows.append(
+        {
+            "set": f"stream of {len(patterns_stream)} ({min(vertex_counts)} to "
+            f"{max(vertex_counts)} vertices)",
+            "solver": "newton",
+            "problems": len(patterns_stream),
+            "compiles": compiles,
+            "buckets": buckets,
+            "batch_time_s": stream_time,
+        }
+    )
+    print(f"stream: {compiles} compilations, {buckets} buckets, {stream_time:.1f} s")
+    write(rows, out)
+    return rows
+
+
+def write(rows: list[dict], out: Path) -> None:
+    import csv
+
+    out.mkdir(parents=True, exist_ok=True)
+    fields = sorted({k for r in rows for k in r}, key=lambda k: list(rows[0]).index(k)
+                    if k in rows[0] else 100)  # fmt: skip
+    with (out / "batch_summary.csv").open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+    device = jax.devices()[0]
+    lines = [
+        f"Measured {time.strftime('%Y-%m-%d')} on {os.cpu_count()} cores, jax {jax.__version__},"
+        f" {device.platform}: {device.device_kind}; float64. Batch: one fold_batch call (compile"
+        " excluded); loop: fold() one by one on 64 of them (compiled beforehand).",
+        "",
+        "| set | solver | problems | padded vertices | converged | mean iterations | compile (s)"
+        " | batch (s) | batch folds/s | loop folds/s | batch / loop | max position diff vs"
+        " single (of diameter) |",
+        "|" + "---|" * 12,
+    ]
+    for r in rows:
+        if "compiles" in r:
+            continue
+        lines.append(
+            f"| {r['set']} | {r['solver']} | {r['problems']} | {r['padded_vertices']} | "
+            f"{r['converged']} | {r['mean_iterations']:.0f} | {r['compile_time_s']:.1f} | "
+            f"{r['batch_time_s']:.2f} | {r['batch_folds_per_s']:.0f} | "
+            f"{r['loop_folds_per_s']:.0f} | {r['speedup']:.1f} | "
+            f"{r['max_position_diff_vs_single']:.1e} |"
+        )
+    for r in rows:
+        if "compiles" in r:
+            lines += [
+                "",
+                f"{r['set']}, each folded by its own fold_batch call (Newton): "
+                f"{r['compiles']} compilations for {r['buckets']} size buckets, "
+                f"{r['batch_time_s']:.1f} s in all.",
+            ]
+    (out / "batch_results.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return
+    data = [r for r in rows if "compiles" not in r]
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    labels = [f"{r['set']}\n{r['solver']}" for r in data]
+    pos = np.arange(len(data))
+    ax.bar(pos - 0.2, [r["batch_folds_per_s"] for r in data], 0.4, label="fold_batch")
+    ax.bar(pos + 0.2, [r["loop_folds_per_s"] for r in data], 0.4, label="loop of fold()")
+    ax.set_xticks(pos, labels, fontsize=6)
+    ax.set_yscale("log")
+    ax.set_ylabel("folds per second")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "batch_throughput.png", dpi=110)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main(Path(__file__).parent / "results", quick="--quick" in sys.argv)

@@ -1,0 +1,454 @@
+"""Fold many problems in one compiled, vmapped solve: :func:`fold_batch`.
+
+Problems of different sizes are padded to shared **size buckets** (powers of two of the vertex,
+bar, crease, facet, free-hinge and pinned counts), so that a stream of new patterns compiles
+only once per bucket. Padding is inert by construction, with no mask in any kernel:
+
+* padded vertices are pinned (they never move) and padded bars join two of them at their rest
+  length 1 with zero stiffness: no energy, no force, no strain;
+* padded hinges lie on four padded vertices folded flat, with target 0 and zero stiffness: no
+  energy, no force, no fold-angle error;
+
+so every energy, gradient, Hessian and maximum over a padded problem equals that of the
+problem alone (means are rescaled to the real counts on the host). Results come back unpadded,
+one :class:`~origami_jax.fold.FoldResult` per problem, in input order.
+
+The batch runs in chunks of a fixed size (the last one filled with copies, whose results are
+dropped), each chunk one vmapped solve in which every member stops on its own tolerance; with
+several devices each chunk is split across them (``jax.shard_map``), each device running its
+own members to their own end. Between chunks the host shows progress; an interrupted batch
+(Ctrl-C) returns the chunks already done.
+
+Example:
+  >>> from origami_jax import fold_batch, patterns
+  >>> cps = [patterns.miura_ori(2, 2, fold_angle=a) for a in (0.5, 1.0, 1.5)]
+  >>> results = fold_batch(cps)
+  >>> [bool(r.converged) for r in results]
+  [True, True, True]
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from origami_jax.energy import FoldParams, Stiffness, param_arrays, structure_arrays
+from origami_jax.fold import FoldResult, _reason, compiled, default_tol, drive, history_of
+from origami_jax.metrics import METRIC_NAMES
+from origami_jax.pattern import CreasePattern, PatternError
+from origami_jax.progress import ProgressBar
+from origami_jax.solvers import Dynamics, Newton, Solver, Status, get_solver
+from origami_jax.solvers.base import Problem, default_max_step, rigid_gauge
+from origami_jax.solvers.dynamics import lumped_mass
+from origami_jax.solvers.newton import layout_arrays
+
+__all__ = ["fold_batch", "BatchSizes", "bucket", "problem_sizes", "compile_count"]
+
+# four padding vertices carry every padded bar and hinge: a unit bar 0-1 and a flat hinge
+_PAD_VERTICES = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
+# the largest padded vertex count that batched Newton solves dense
+BATCH_DENSE_MAX = 512
+
+
+class BatchSizes(NamedTuple):
+    """The array sizes of a problem: vertices, bars, driven creases, facet creases, free
+    hinges and pinned vertices (the static shapes a compiled solve depends on)."""
+
+    vertices: int
+    bars: int
+    creases: int
+    facets: int
+    free: int
+    pinned: int
+
+
+def _pow2(n: int) -> int:
+    return 0 if n <= 0 else 1 << (int(n) - 1).bit_length()
+
+
+def bucket(sizes: BatchSizes) -> BatchSizes:
+    """The padded sizes of a problem: each count rounded up to a power of two, with room for
+    the four padding vertices and one padding bar (which padded hinges point to)."""
+    return BatchSizes(
+        vertices=_pow2(sizes.vertices + len(_PAD_VERTICES)),
+        bars=_pow2(sizes.bars + 1),
+        creases=_pow2(sizes.creases),
+        facets=_pow2(sizes.facets),
+        free=_pow2(sizes.free),
+        pinned=_pow2(sizes.pinned),
+    )
+
+
+def problem_sizes(pattern: CreasePattern) -> BatchSizes:
+    """The unpadded :class:`BatchSizes` of a pattern's folding problem."""
+    mesh = pattern.mesh
+    s = structure_arrays(mesh)
+    pieces = len(rigid_gauge(mesh, mesh.vertices)[0])
+    return BatchSizes(
+        mesh.num_vertices, len(s.bars), s.num_creases, s.num_facets, len(s.free), pieces
+    )
+
+
+class _Member(NamedTuple):
+    index: int
+    pattern: CreasePattern
+    problem: Problem  # unpadded, NumPy leaves
+    sizes: BatchSizes
+
+
+def _pad_rows(a: np.ndarray, n: int, fill) -> np.ndarray:
+    """``a`` with rows appended up to ``n``, each equal to ``fill``."""
+    a = np.asarray(a)
+    extra = n - a.shape[0]
+    if extra <= 0:
+        return a
+    pad = np.broadcast_to(np.asarray(fill, a.dtype), (extra, *a.shape[1:]))
+    return np.concatenate([a, pad])
+
+
+def _padded(member: _Member, to: BatchSizes, solver: Solver) -> Problem:
+    """The member's problem padded to the sizes ``to`` (NumPy leaves)."""
+    p, s = member.problem, member.sizes
+    st, prm = p.structure, p.params
+    v = s.vertices
+    pad_bar = [v, v + 1]
+    pad_hinge = [v, v + 1, v + 2, v + 3]
+    nc = st.num_creases
+    hinges = np.concatenate(
+        [
+            _pad_rows(st.hinges[:nc], to.creases, pad_hinge),
+            _pad_rows(st.hinges[nc:], to.facets, pad_hinge),
+        ]
+    ).astype(np.int32)
+    hinge_bars = np.concatenate(
+        [
+            _pad_rows(st.hinge_bars[:nc], to.creases, s.bars),
+            _pad_rows(st.hinge_bars[nc:], to.facets, s.bars),
+        ]
+    ).astype(np.int32)
+    structure = replace(
+        st,
+        bars=_pad_rows(st.bars, to.bars, pad_bar).astype(np.int32),
+        hinges=hinges,
+        hinge_bars=hinge_bars,
+        free=_pad_rows(st.free, to.free, pad_hinge).astype(np.int32),
+        free_bars=_pad_rows(st.free_bars, to.free, s.bars).astype(np.int32),
+        num_creases=to.creases,
+    )
+    k = prm.stiffness
+    stiffness = Stiffness(
+        axial=_pad_rows(np.broadcast_to(k.axial, (s.bars,)), to.bars, 0.0),
+        facet=_pad_rows(np.broadcast_to(k.facet, (s.facets,)), to.facets, 0.0),
+        crease=_pad_rows(np.broadcast_to(k.crease, (s.creases,)), to.creases, 0.0),
+    )
+    params = FoldParams(
+        target=_pad_rows(prm.target, to.creases, 0.0),
+        percent=prm.percent,
+        rest_length=_pad_rows(prm.rest_length, to.bars, 1.0),
+        stiffness=stiffness,
+    )
+    start = np.concatenate([p.start, _pad_rows(_PAD_VERTICES, to.vertices - v, _PAD_VERTICES[0])])
+    # every padding vertex is pinned in place (its rows repeat the first one): the gauge's
+    # pins, then the padding vertices, then fill, to a length that fits every member of a bucket
+    pinned = np.concatenate([p.pinned, np.arange(v, to.vertices)])
+    projectors = np.concatenate([p.projectors, np.zeros((to.vertices - v, 3, 3))])
+    length = to.pinned + to.vertices
+    pinned = _pad_rows(pinned, length, v).astype(np.int32)
+    projectors = _pad_rows(projectors, length, np.zeros((3, 3)))
+    problem = replace(
+        p,
+        structure=structure,
+        params=params,
+        start=start,
+        pinned=pinned,
+        projectors=projectors,
+    )
+    return replace(problem, aux=_padded_aux(solver, member, problem, to))
+
+
+def _padded_aux(solver: Solver, member: _Member, problem: Problem, to: BatchSizes):
+    if isinstance(solver, Newton):
+        st = problem.structure
+        return layout_arrays(np.asarray(st.bars), np.asarray(st.hinges), to.vertices, None)
+    if isinstance(solver, Dynamics) and solver.mass != "unit":
+        return _pad_rows(lumped_mass(member.pattern.mesh), to.vertices, 1.0)
+    return None
+
+
+def _member(index, pattern, percent, stiffness, start, tol, dtype) -> _Member:
+    mesh = pattern.mesh
+    structure = structure_arrays(mesh)
+    params = param_arrays(pattern, percent, stiffness)
+    if start is None and pattern.start is not None:
+        start = pattern.start[mesh.source_vertex]
+    if start is None:
+        start = mesh.vertices
+    start = np.asarray(start, np.float64)
+    if start.shape != mesh.vertices.shape:
+        raise PatternError(
+            f"start {index}: expected shape {mesh.vertices.shape}, got {start.shape}"
+        )
+    bad = ~np.isfinite(start).all(axis=1)
+    if bad.any():
+        raise PatternError(f"start {index}: vertex {int(np.flatnonzero(bad)[0])} is not finite")
+    pinned, projectors = rigid_gauge(mesh, start)
+    problem = Problem(
+        structure=structure,
+        params=params,
+        start=start,
+        pinned=pinned,
+        projectors=projectors,
+        tol=np.asarray(tol),
+        max_step=np.asarray(default_max_step(mesh)),
+    )
+    sizes = BatchSizes(
+        mesh.num_vertices,
+        len(structure.bars),
+        structure.num_creases,
+        structure.num_facets,
+        len(structure.free),
+        len(pinned),
+    )
+    return _Member(index, pattern, problem, sizes)
+
+
+def _per_problem(value, n: int, what: str) -> list:
+    """A value shared by all ``n`` problems, or a sequence with one per problem."""
+    if isinstance(value, (list, tuple)) and not isinstance(value, Stiffness):
+        if len(value) != n:
+            raise ValueError(f"{what}: {len(value)} values for {n} problems")
+        return list(value)
+    if isinstance(value, np.ndarray) and what in ("percent", "tol") and value.ndim == 1:
+        if len(value) != n:
+            raise ValueError(f"{what}: {len(value)} values for {n} problems")
+        return list(value)
+    return [value] * n
+
+
+_COMPILES: list[int] = [0]
+
+
+def compile_count() -> int:
+    """How many batched solves :func:`fold_batch` has compiled in this process."""
+    return _COMPILES[0]
+
+
+def _wrap(devices: list):
+    """vmap over the batch axis; with several devices, each takes a slice of it."""
+
+    def wrap(fn, in_axes):
+        batched = jax.vmap(fn, in_axes=in_axes)
+        if len(devices) == 1:
+            return batched
+        mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
+        spec = jax.sharding.PartitionSpec("batch")
+        in_specs = tuple(spec if a == 0 else jax.sharding.PartitionSpec() for a in in_axes)
+        return jax.shard_map(batched, mesh=mesh, in_specs=in_specs, out_specs=spec, check_vma=False)
+
+    return wrap
+
+
+def _chunk_size(requested: int | None, n: int, solver: Solver, to: BatchSizes, devices) -> int:
+    if requested is None:
+        requested = 256
+        if isinstance(solver, Newton):
+            # keep each chunk's dense matrices near 256 MB
+            per_member = (3 * to.vertices) ** 2 * 8
+            requested = max(1, min(256, 2 ** int(np.log2(max(2**28 // per_member, 1)))))
+    size = min(int(requested), _pow2(n))
+    d = len(devices)
+    return -(-size // d) * d
+
+
+def fold_batch(
+    patterns: CreasePattern | Sequence[CreasePattern],
+    percent: float | Sequence[float] = 1.0,
+    stiffness: Stiffness | dict | Sequence | None = None,
+    starts: Sequence[np.ndarray | None] | None = None,
+    solver: str | Solver = "newton",
+    tol: float | None = None,
+    max_iter: int = 100_000,
+    dtype=None,
+    chunk_size: int | None = None,
+    devices: Sequence | None = None,
+    progress: bool | None = None,
+    max_time: float | None = None,
+) -> list[FoldResult | None]:
+    """Fold many problems in vmapped, compiled solves; one :class:`FoldResult` per problem.
+
+    Args:
+      patterns: one pattern (folded once per parameter set) or a sequence of patterns, any
+        sizes and topologies.
+      percent, stiffness: one value for all, or a sequence with one per problem.
+      starts: ``None`` or a sequence with one start (V_mesh, 3) or ``None`` per problem.
+      solver: ``"newton"`` (dense Cholesky per member; padded sizes up to
+        ``BATCH_DENSE_MAX`` vertices), ``"lbfgs"``, ``"dynamics"``, or a solver object.
+      tol, max_iter, dtype, max_time: as in :func:`~origami_jax.fold`; ``max_time`` applies
+        to each chunk.
+      chunk_size: problems per compiled solve (default 256, less for large Newton problems);
+        rounded to a multiple of the device count.
+      devices: the devices to split each chunk across (default all of JAX's default backend).
+      progress: show chunks done / total on stderr (default: once a batch has run 2 s).
+
+    Returns:
+      A list in input order. A problem's result equals folding it alone (to the rounding of a
+      different summation order). When interrupted (KeyboardInterrupt) between or during
+      chunks, the list holds the finished chunks' results and ``None`` for the rest, with a
+      warning.
+    """
+    if isinstance(patterns, CreasePattern):
+        lengths = [
+            len(v)
+            for v in (percent, stiffness, starts)
+            if isinstance(v, (list, tuple)) and not isinstance(v, Stiffness)
+        ]
+        if isinstance(percent, np.ndarray) and percent.ndim == 1:
+            lengths.append(len(percent))
+        patterns = [patterns] * (max(lengths) if lengths else 1)
+    patterns = list(patterns)
+    n = len(patterns)
+    for k, cp in enumerate(patterns):
+        if not isinstance(cp, CreasePattern):
+            raise TypeError(f"fold_batch(): problem {k} is a {type(cp).__name__}, not a pattern")
+    solver_obj = get_solver(solver)
+    if isinstance(solver_obj, Dynamics) and solver_obj.remove_momentum:
+        raise ValueError("fold_batch(): remove_momentum is not supported (padding has mass)")
+    if isinstance(solver_obj, Newton) and solver_obj.linear_solver == "sparse":
+        raise ValueError("fold_batch(): batched Newton solves dense; use linear_solver='auto'")
+    dtype = jnp.dtype(dtype or jnp.result_type(float))
+    if dtype == jnp.float64 and not jax.config.jax_enable_x64:
+        raise ValueError(
+            "float64 needs jax.config.update('jax_enable_x64', True) (or JAX_ENABLE_X64=1)"
+        )
+    tol = default_tol(dtype) if tol is None else float(tol)
+    percents = _per_problem(percent, n, "percent")
+    for k, pc in enumerate(percents):
+        if not np.isfinite(pc):
+            raise PatternError(f"percent {k}: must be finite, got {pc}")
+    stiffnesses = _per_problem(stiffness, n, "stiffness")
+    start_list = [None] * n if starts is None else _per_problem(list(starts), n, "starts")
+    devices = list(devices) if devices is not None else jax.devices()
+
+    members = [
+        _member(k, cp, percents[k], stiffnesses[k], start_list[k], tol, dtype)
+        for k, cp in enumerate(patterns)
+    ]
+    groups: dict[BatchSizes, list[_Member]] = {}
+    for m in members:
+        groups.setdefault(bucket(m.sizes), []).append(m)
+    if isinstance(solver_obj, Newton):
+        for to in groups:
+            if to.vertices > BATCH_DENSE_MAX:
+                raise ValueError(
+                    f"fold_batch(): a problem of {to.vertices} padded vertices is too large for "
+                    f"batched dense Newton (<= {BATCH_DENSE_MAX}); use fold() or "
+                    "solver='lbfgs'"
+                )
+    plan = []
+    for to, group in groups.items():
+        size = _chunk_size(chunk_size, len(group), solver_obj, to, devices)
+        plan += [(to, group[i : i + size], size) for i in range(0, len(group), size)]
+
+    results: list[FoldResult | None] = [None] * n
+    bar = None
+    if progress is not False:
+        bar = ProgressBar(len(plan), delay=0.0 if progress else 2.0, unit="chunks")
+    t_start = time.perf_counter()
+    done = 0
+    try:
+        for to, chunk, size in plan:
+            _run_chunk(chunk, to, size, solver_obj, dtype, devices, max_iter, max_time, results)
+            done += 1
+            if bar is not None:
+                elapsed = time.perf_counter() - t_start
+                solved = sum(len(c) for _, c, _ in plan[:done])
+                bar.update(done, f"{solved} problems, {solved / max(elapsed, 1e-9):.0f}/s")
+    except KeyboardInterrupt:
+        warnings.warn(
+            f"fold_batch() interrupted after {done} of {len(plan)} chunks: "
+            f"{sum(r is not None for r in results)} of {n} problems have results, the rest "
+            "are None",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    return results
+
+
+def _run_chunk(chunk, to, size, solver, dtype, devices, max_iter, max_time, results) -> None:
+    """Pad, stack and solve one chunk; write its members' results into ``results``."""
+    filled = chunk + [chunk[0]] * (size - len(chunk))
+    padded = [_padded(m, to, solver) for m in filled]
+    stacked = jax.tree.map(lambda *a: np.stack(a), *padded)
+    floats = (stacked.params, stacked.start, stacked.projectors, stacked.tol, stacked.max_step)
+    floats = jax.tree.map(lambda a: np.asarray(a, dtype), floats)
+    problem = replace(
+        stacked,
+        params=floats[0],
+        start=floats[1],
+        projectors=floats[2],
+        tol=floats[3],
+        max_step=floats[4],
+        aux=stacked.aux if not isinstance(stacked.aux, np.ndarray) else stacked.aux.astype(dtype),
+    )
+    if len(devices) > 1:
+        sharding = jax.sharding.NamedSharding(
+            jax.sharding.Mesh(np.array(devices), ("batch",)), jax.sharding.PartitionSpec("batch")
+        )
+        problem = jax.device_put(problem, sharding)
+    else:
+        problem = jax.device_put(problem, devices[0])
+    (init, advance), compile_time = compiled(
+        solver, problem, to.bars, wrap=_wrap(devices), key=("batch", tuple(devices))
+    )
+    if compile_time > 0:
+        _COMPILES[0] += 1
+    t0 = time.perf_counter()
+    state, m, x, angles, samples, out_of_time = drive(
+        solver, init, advance, problem, max_iter, max_time, None
+    )
+    state, m, x, angles = jax.device_get((state, m, x, angles))
+    wall_time = time.perf_counter() - t0
+    for b, member in enumerate(chunk):
+        results[member.index] = _result(
+            member, b, to, state, m, x, angles, samples, out_of_time, solver, dtype,
+            wall_time, compile_time,
+        )  # fmt: skip
+
+
+def _result(member, b, to, state, m, x, angles, samples, out_of_time, solver, dtype, wall, comp):
+    s = member.sizes
+    status = Status(int(state.status[b]))
+    if status == Status.RUNNING:
+        status = Status.TIME_LIMIT if out_of_time else Status.MAX_ITER
+    metrics = {k: float(m[k][b]) for k in METRIC_NAMES}
+    # padding adds exact zeros: means over the real elements only
+    metrics["strain_mean"] *= to.bars / s.bars
+    metrics["fold_angle_error_mean"] *= to.creases / s.creases if s.creases else 0.0
+    iterations = int(state.iteration[b])
+    tol = float(member.problem.tol)
+    return FoldResult(
+        pattern=member.pattern,
+        positions=np.asarray(x[b, : s.vertices], np.float64),
+        fold_angles=np.asarray(angles[b, : s.bars], np.float64),
+        converged=status == Status.CONVERGED,
+        status=status,
+        reason=_reason(status, metrics, tol, iterations),
+        iterations=iterations,
+        solver=solver.name,
+        percent=float(member.problem.params.percent),
+        dtype=dtype.name,
+        wall_time=wall,
+        compile_time=comp,
+        history=history_of(samples, b),
+        **metrics,
+    )

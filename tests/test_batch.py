@@ -1,0 +1,204 @@
+"""fold_batch: equal to single folds, padding inert, sharded equal to unsharded, errors."""
+
+import os
+import subprocess
+import sys
+import textwrap
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from origami_jax import PatternError, fold, patterns
+from origami_jax import batch as batch_module
+from origami_jax.batch import BatchSizes, bucket, compile_count, fold_batch, problem_sizes
+from origami_jax.energy import energy
+from origami_jax.geometry import bar_lengths, fold_angles
+from origami_jax.solvers import Newton
+from origami_jax.solvers.base import positions
+
+jax.config.update("jax_enable_x64", True)
+
+# two buckets: three Miura-ori 2 x 2 (one compile, two chunks of two), and the seed's scene
+MIURAS = [patterns.miura_ori(2, 2, fold_angle=a) for a in (0.6, 1.2, 2.0)]
+SEED = patterns.seed_waterbomb()
+
+
+@pytest.fixture(scope="module")
+def batch_and_singles():
+    cps = [MIURAS[0], SEED, MIURAS[1], MIURAS[2]]
+    results = fold_batch(cps, chunk_size=2, progress=False)
+    singles = [fold(cp) for cp in cps]
+    return cps, results, singles
+
+
+def test_batch_equals_single_folds(batch_and_singles):
+    cps, results, singles = batch_and_singles
+    assert len(results) == len(cps)
+    for cp, r, s in zip(cps, results, singles, strict=True):
+        assert r.pattern is cp  # input order
+        assert r.converged and s.converged
+        assert r.positions.shape == s.positions.shape
+        assert np.max(np.abs(r.positions - s.positions)) <= 1e-10 * cp.diameter
+        np.testing.assert_allclose(r.fold_angles, s.fold_angles, atol=1e-9)
+        for name in ("fold_angle_error_max", "fold_angle_error_mean", "strain_mean", "energy"):
+            assert getattr(r, name) == pytest.approx(getattr(s, name), rel=1e-6, abs=1e-12)
+        assert len(r.history["wall_time"]) >= 2
+
+
+def test_one_pattern_many_parameter_sets():
+    percents = [0.25, 0.5, 1.0]
+    results = fold_batch(MIURAS[1], percent=percents, progress=False)
+    assert [r.percent for r in results] == percents
+    for p, r in zip(percents, results, strict=True):
+        single = fold(MIURAS[1], percent=p)
+        assert r.converged
+        assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * MIURAS[1].diameter
+    assert results[0].energy != pytest.approx(results[1].energy, rel=1e-3)
+
+
+def _padded_problem(cp, grow: int):
+    member = batch_module._member(0, cp, 0.7, None, None, 1e-10, jnp.float64)
+    to = bucket(member.sizes)
+    bigger = BatchSizes(*(2 * v if v else 0 for v in to))
+    bigger = bigger._replace(creases=bigger.creases or 4, facets=bigger.facets or 4)
+    return member, batch_module._padded(member, bigger if grow else to, Newton())
+
+
+@pytest.mark.parametrize("cp", [MIURAS[0], SEED, patterns.single_crease(1.0)], ids=str)
+def test_padding_is_inert(cp):
+    member, padded = _padded_problem(cp, grow=1)
+    real, pad = member.problem, padded
+    v = member.sizes.vertices
+    rng = np.random.default_rng(1)
+    x = real.start + 0.05 * rng.standard_normal(real.start.shape)
+    x_pad = np.concatenate([x, pad.start[v:]])
+    ref = np.zeros(len(real.structure.hinges))
+    ref_pad = np.zeros(len(pad.structure.hinges))
+
+    def e(xx, p, r):
+        return energy(xx, p.structure, p.params, r)
+
+    e0, g0 = jax.value_and_grad(e)(jnp.asarray(x), real, jnp.asarray(ref))
+    e1, g1 = jax.value_and_grad(e)(jnp.asarray(x_pad), pad, jnp.asarray(ref_pad))
+    assert float(e1) == pytest.approx(float(e0), rel=1e-14)
+    np.testing.assert_allclose(g1[:v], g0, rtol=1e-12, atol=1e-14)
+    assert np.all(np.asarray(g1[v:]) == 0.0)
+    # padded bars at rest length, padded hinges flat with goal 0: zero strain and error
+    s = pad.structure
+    nb = member.sizes.bars
+    lengths = np.asarray(bar_lengths(jnp.asarray(x_pad), s.bars))
+    assert np.all(lengths[nb:] == pad.params.rest_length[nb:])
+    angles = np.asarray(fold_angles(jnp.asarray(x_pad), s.hinges))
+    nc, pc = member.sizes.creases, pad.structure.num_creases
+    assert np.all(angles[nc:pc] == 0) and np.all(pad.params.target[nc:] == 0)
+    assert np.all(angles[pc + member.sizes.facets :] == 0)
+    # padding vertices cannot move: pinned with a zero projector
+    u = jnp.ones_like(jnp.asarray(pad.start))
+    moved = np.asarray(positions(jax.tree.map(jnp.asarray, pad), u) - pad.start)
+    assert np.all(moved[v:] == 0)
+
+
+def test_padded_solve_equals_unpadded_bucket():
+    """A problem solved in a bucket twice its size gives the same result (padding inert in
+    the whole solver, Newton's dense Hessian included)."""
+    cp = MIURAS[0]
+    member, big = _padded_problem(cp, grow=1)
+    _, small = _padded_problem(cp, grow=0)
+    out = []
+    for problem, num_edges in ((small, bucket(member.sizes).bars), (big, len(big.structure.bars))):
+        problem = jax.tree.map(lambda a: jnp.asarray(a)[None], problem)
+        solver = Newton()
+        (init, advance), _ = batch_module.compiled(
+            solver, problem, num_edges, wrap=batch_module._wrap(jax.devices()[:1]), key="test"
+        )
+        state, m, x, _, _, _ = batch_module.drive(solver, init, advance, problem, 200, None, None)
+        out.append((np.asarray(x[0, : member.sizes.vertices]), float(m["energy"][0])))
+    assert np.max(np.abs(out[0][0] - out[1][0])) <= 1e-10 * cp.diameter
+    assert out[0][1] == pytest.approx(out[1][1], rel=1e-8, abs=1e-15)
+
+
+def test_buckets_are_powers_of_two_with_room():
+    sizes = problem_sizes(MIURAS[0])
+    to = bucket(sizes)
+    for real, padded in zip(sizes, to, strict=True):
+        assert padded >= real and (padded == 0 or padded & (padded - 1) == 0)
+    assert to.vertices >= sizes.vertices + 4 and to.bars > sizes.bars
+
+
+def test_stream_compiles_once_per_bucket():
+    cps = [patterns.miura_ori(2, 2, fold_angle=a) for a in (0.3, 0.9)] + [MIURAS[2]]
+    before = compile_count()
+    for cp in cps:
+        fold_batch(cp, progress=False)
+    assert compile_count() - before <= 1  # all three share a bucket (maybe compiled already)
+
+
+def test_interrupt_keeps_finished_chunks(monkeypatch):
+    calls = []
+    real = batch_module._run_chunk
+
+    def flaky(chunk, *args):
+        calls.append(len(chunk))
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(chunk, *args)
+
+    monkeypatch.setattr(batch_module, "_run_chunk", flaky)
+    with pytest.warns(RuntimeWarning, match="interrupted after 1 of 2 chunks"):
+        results = fold_batch(MIURAS, chunk_size=2, progress=False)
+    assert [r is not None for r in results] == [True, True, False]
+    assert results[0].converged
+
+
+def test_bad_input():
+    with pytest.raises(TypeError, match="problem 1"):
+        fold_batch([MIURAS[0], "x"])
+    with pytest.raises(ValueError, match="percent: 2 values for 3 problems"):
+        fold_batch(MIURAS, percent=[0.5, 1.0])
+    with pytest.raises(PatternError, match="percent 1: must be finite"):
+        fold_batch(MIURAS[:2], percent=[0.5, float("nan")])
+    bad = MIURAS[0].mesh.vertices.copy()
+    bad[4, 2] = np.nan
+    with pytest.raises(PatternError, match="start 1: vertex 4 is not finite"):
+        fold_batch(MIURAS[:2], starts=[None, bad])
+    with pytest.raises(ValueError, match="dense"):
+        fold_batch(MIURAS[:1], solver=Newton(linear_solver="sparse"))
+
+
+SHARDED = textwrap.dedent(
+    """
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    import numpy as np
+    from origami_jax import patterns
+    from origami_jax.batch import fold_batch
+    assert len(jax.devices()) == 2, jax.devices()
+    cps = [patterns.miura_ori(2, 2, fold_angle=a) for a in (0.5, 0.9, 1.3)]
+    two = fold_batch(cps, progress=False)
+    one = fold_batch(cps, devices=jax.devices()[:1], progress=False)
+    for a, b in zip(two, one):
+        assert a.converged and b.converged
+        assert np.max(np.abs(a.positions - b.positions)) <= 1e-12, (a, b)
+        assert a.iterations == b.iterations
+    print("sharded ok")
+    """
+)
+
+
+def test_sharded_equals_unsharded():
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    out = subprocess.run(
+        [sys.executable, "-c", SHARDED], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "sharded ok" in out.stdout
+
+
+def test_no_warning_on_a_plain_batch():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        (r,) = fold_batch(MIURAS[:1], progress=False)
+    assert r.converged
