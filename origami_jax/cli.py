@@ -1,6 +1,8 @@
-"""Command line: ``origami-jax fold INPUT|--example NAME --out OUT [options]`` and
+"""Command line: ``origami-jax fold INPUT|--example NAME --out OUT [options]``,
 ``origami-jax info INPUT`` (counts, pieces, holes, reading warnings, vertices that are not
-flat-foldable; see :mod:`origami_jax.info`).
+flat-foldable; see :mod:`origami_jax.info`) and ``origami-jax render INPUT|--example NAME --out
+fold.png|fold.html|fold.gif|fold.mp4`` (a picture, an interactive page or an animation of the
+fold; see :mod:`origami_jax.viz`, needs ``pip install "origami-jax[viz]"``).
 
 Runs in float64 unless ``--float32`` is given. With ``--cache`` it keeps compiled solvers in a
 persistent cache (``$XDG_CACHE_HOME/origami_jax/<machine>``, default ``~/.cache/origami_jax``,
@@ -31,22 +33,26 @@ EXAMPLES = (
 SEED_FINAL_ENERGY = 0.009519  # the seed's simulator, stopped by hand (anchors.md)
 
 
+def _scene_arguments(p: argparse.ArgumentParser, out_help: str) -> None:
+    """The arguments ``fold`` and ``render`` share: what to fold, where to write it, how."""
+    p.add_argument(
+        "input", nargs="?", help="a .fold or .svg file (default: --example seed_waterbomb)"
+    )
+    p.add_argument("--example", choices=EXAMPLES, help="use a built-in pattern instead")
+    p.add_argument("--out", help=out_help)
+    p.add_argument("--solver", default="newton", help="newton (default), lbfgs or dynamics")
+    p.add_argument("--percent", type=float, default=100.0, help="fold percent (default: 100)")
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="origami-jax", description="Fold crease patterns with a differentiable JAX solver."
     )
     sub = parser.add_subparsers(dest="command", required=True)
     f = sub.add_parser("fold", help="fold a crease pattern and write the folded state")
-    f.add_argument(
-        "input", nargs="?", help="a .fold or .svg file (default: --example seed_waterbomb)"
+    _scene_arguments(
+        f, "output file: .fold, .svg, .obj, .ply, .stl or .vtu (default: <name>-folded.fold)"
     )
-    f.add_argument("--example", choices=EXAMPLES, help="fold a built-in pattern instead")
-    f.add_argument(
-        "--out",
-        help="output file: .fold, .svg, .obj, .ply, .stl or .vtu (default: <name>-folded.fold)",
-    )
-    f.add_argument("--solver", default="newton", help="newton (default), lbfgs or dynamics")
-    f.add_argument("--percent", type=float, default=100.0, help="fold percent (default: 100)")
     f.add_argument("--tol", type=float, default=None, help="grad_norm_rel tolerance")
     f.add_argument("--max-iter", type=int, default=100_000, help="iteration limit")
     f.add_argument("--max-time", type=float, default=None, help="time limit in seconds")
@@ -59,6 +65,19 @@ def _parser() -> argparse.ArgumentParser:
     )
     i = sub.add_parser("info", help="describe a crease pattern: counts, pieces, holes, checks")
     i.add_argument("input", help="a .fold or .svg file")
+    r = sub.add_parser("render", help="fold a crease pattern and draw it (PNG, HTML, GIF, MP4)")
+    _scene_arguments(
+        r,
+        ".png (3-D picture), .html (interactive, offline), .gif or .mp4 (the fold from flat;"
+        " MP4 needs ffmpeg or imageio-ffmpeg) (default: <name>.png)",
+    )
+    r.add_argument(
+        "--color", choices=("strain", "fold_angle_error"), help="colour the faces by this error"
+    )
+    r.add_argument("--frames", type=int, default=30, help="animation frames (default: 30)")
+    r.add_argument("--fps", type=int, default=15, help="animation frames per second (15)")
+    r.add_argument("--max-iter", type=int, default=100_000, help="iteration limit per fold")
+    r.add_argument("--dpi", type=int, default=120, help="PNG / animation resolution (120)")
     return parser
 
 
@@ -109,16 +128,68 @@ def _machine_key() -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
+RENDER_FORMATS = (".png", ".html", ".gif", ".mp4")
+
+
+def _render(args, pattern, stiffness) -> int:
+    """``origami-jax render``: fold, then draw by the output's suffix, written atomically."""
+    from pathlib import Path
+
+    from origami_jax import viz
+    from origami_jax.fold import fold
+    from origami_jax.io.fold import atomic_path
+
+    out = Path(args.out or f"{pattern.name}.png")
+    suffix = out.suffix.lower()
+    if suffix not in RENDER_FORMATS:  # before any work: nothing is written
+        raise ValueError(
+            f"{out}: unsupported render format {out.suffix!r} (use {', '.join(RENDER_FORMATS)})"
+        )
+    if not out.parent.is_dir():
+        raise FileNotFoundError(f"{out}: the folder {out.parent} does not exist")
+    # a missing extra or ffmpeg fails before the fold
+    if suffix == ".html":
+        viz._plotly()
+    else:
+        viz._matplotlib()
+    if suffix in (".gif", ".mp4"):
+        viz._movie_rc(out)
+    percent = args.percent / 100.0
+    solve = dict(stiffness=stiffness, solver=args.solver, max_iter=args.max_iter)
+    if suffix in (".gif", ".mp4"):
+        frames = viz.fold_frames(pattern, args.frames, percent=percent, **solve)
+        viz.animate_fold(pattern, out, frames, args.fps, color=args.color, dpi=args.dpi)
+        result = frames[-1]
+    else:
+        result = fold(pattern, percent=percent, **solve)
+        if suffix == ".html":
+            viz.save_html(result, out, color=args.color)
+        else:
+            import matplotlib
+
+            matplotlib.use("Agg")  # no window; the CLI may choose the backend
+            import matplotlib.pyplot as plt
+
+            fig = viz.plot_fold(result, color=args.color)
+            with atomic_path(out) as tmp:
+                fig.savefig(tmp, dpi=args.dpi)
+            plt.close(fig)
+    print(result.summary())
+    print(f"{'written':<20}  {out}")
+    return 0 if result.converged else 1
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     if args.command == "info":
         return _info(args.input)
-    if not args.float32:
+    float32 = getattr(args, "float32", False)
+    if not float32:
         os.environ.setdefault("JAX_ENABLE_X64", "1")
     import jax
 
-    jax.config.update("jax_enable_x64", not args.float32)
-    if args.cache:
+    jax.config.update("jax_enable_x64", not float32)
+    if getattr(args, "cache", False):
         base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
         # one cache per CPU kind: code compiled for other CPU features must not be loaded
         cache = os.path.join(base, "origami_jax", _machine_key())
@@ -133,6 +204,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"warning: {message}", file=sys.stderr)
 
     warnings.showwarning = show_warning
+    if args.command == "render":
+        try:
+            pattern, stiffness = _load(args)
+            return _render(args, pattern, stiffness)
+        except (PatternError, ValueError, OSError, ImportError, RuntimeError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
     try:
         pattern, stiffness = _load(args)
         out = args.out or f"{pattern.name}-folded.fold"

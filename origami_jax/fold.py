@@ -219,7 +219,10 @@ def drive(solver, init, advance, problem, max_iter: int, max_time, record_every,
 def _reason(status: Status, m: dict, tol: float, iterations: int) -> str:
     g = m["grad_norm_rel"]
     return {
-        Status.CONVERGED: f"converged: grad_norm_rel {g:.2e} <= tol {tol:.1e}",
+        Status.CONVERGED: f"converged: grad_norm_rel {g:.2e} <= tol {tol:.1e}"
+        if g <= tol
+        else f"converged: grad_norm_rel {g:.2e} > tol {tol:.1e} is this dtype's rounding "
+        "floor for these stiffnesses (the gradient is noise there)",
         Status.MAX_ITER: f"iteration limit {iterations} reached: grad_norm_rel {g:.2e} > "
         f"tol {tol:.1e}",
         Status.TIME_LIMIT: f"time limit reached after {iterations} iterations: grad_norm_rel "

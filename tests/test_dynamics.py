@@ -57,8 +57,9 @@ def miura():
 
 @pytest.mark.parametrize(
     "solver",
-    [Dynamics(integrator="verlet"), Dynamics(mass="area"), Dynamics(ramp_steps=400)],
-    ids=["verlet", "area-mass", "ramp"],
+    # options paired where they are independent: each solver object compiles anew
+    [Dynamics(integrator="verlet", mass="area"), Dynamics(ramp_steps=400)],
+    ids=["verlet-area-mass", "ramp"],
 )
 def test_options_reach_the_exact_shape(miura, solver):
     cp, exact = miura
@@ -70,8 +71,9 @@ def test_options_reach_the_exact_shape(miura, solver):
 
 @pytest.mark.parametrize(
     "solver",
-    [Dynamics(damping="bar"), Dynamics(damping="bar", integrator="verlet"), origami_simulator()],
-    ids=["bar", "bar-verlet", "origami-simulator"],
+    # origami_simulator(): bar damping with semi-implicit Euler
+    [Dynamics(damping="bar", integrator="verlet"), origami_simulator()],
+    ids=["bar-verlet", "origami-simulator"],
 )
 def test_bar_damping_converges(solver):
     cp = patterns.single_crease(fold_angle=1.0)
@@ -113,9 +115,13 @@ def test_momentum_removal():
     mesh = cp.mesh
     problem = make_problem(mesh, make_structure(mesh), make_params(cp))
     solver = Dynamics(damping="viscous", remove_momentum=True)
-    state = solver.init_fn(problem)
-    for _ in range(5):
-        state = solver.step_fn(state, problem)
+
+    @jax.jit  # compiled: five steps op by op take several times longer
+    def five_steps(problem):
+        state = solver.init_fn(problem)
+        return jax.lax.fori_loop(0, 5, lambda _, s: solver.step_fn(s, problem), state)
+
+    state = five_steps(problem)
     x = np.asarray(positions(problem, state.u))
     v = np.asarray(state.v)
     assert np.abs(v).max() > 1e-6  # it moves

@@ -12,7 +12,7 @@ from origami_jax.energy import (
     make_params,
     make_structure,
 )
-from origami_jax.geometry import fold_angles
+from origami_jax.geometry import dihedral_angles, dihedral_gradients, fold_angles
 
 SQUARE = dict(
     vertices=[[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0], [0.5, 1], [0.5, 0.5]],
@@ -131,6 +131,31 @@ def test_dihedral_matches_built_hinges():
         assert got == pytest.approx(rho, abs=1e-12)
         # the seed's dihedral theta = pi - rho and the valley sign: wings above the plane
         assert (rho > 0) == (float(x[2, 2]) > 0) or abs(rho) < 1e-12
+
+
+def test_closed_form_dihedral_gradient_and_its_jacobian_match_autodiff():
+    rng = np.random.default_rng(3)
+    corners = [hinge(rho)[0] for rho in (-np.pi + 1e-3, -2.0, 0.0, 1e-9, 1.0, 3.1)]
+    corners += [jnp.asarray(rng.normal(size=(4, 3))) for _ in range(20)]
+    corners += [1e-3 * c for c in corners[:3]] + [1e3 * c for c in corners[:3]]
+    p = jnp.stack(corners)
+
+    def one(q):
+        return dihedral_angles(q[None])[0]
+
+    def closed(q):
+        return dihedral_gradients(q[None])[0]
+
+    @jax.jit  # compiled: op by op, the Hessians take several times longer
+    def derivatives(p):
+        g, h = jax.vmap(jax.grad(one))(p), jax.vmap(jax.hessian(one))(p)
+        return g, h, dihedral_gradients(p), jax.vmap(jax.jacfwd(closed))(p)
+
+    g, h, got_g, got_h = derivatives(p)
+    scale_g = jnp.max(jnp.abs(g), axis=(1, 2), keepdims=True)
+    scale_h = jnp.max(jnp.abs(h), axis=(1, 2, 3, 4), keepdims=True)
+    assert float(jnp.max(jnp.abs(got_g - g) / scale_g)) < 1e-12
+    assert float(jnp.max(jnp.abs(got_h - h) / scale_h)) < 1e-10
 
 
 def test_dihedral_continuous_through_pi():

@@ -145,10 +145,11 @@ def test_float32():
     assert result.converged, result.reason
     assert result.fold_angle_error_max <= 1e-3
     assert result.shape_error <= 1e-4
-    # pushed below its rounding floor, float32 stops by itself and says so
+    # asked for a tolerance below its rounding floor, float32 stops at the floor and says so
     floor = fold(cp, dtype=jnp.float32, tol=1e-12, max_iter=20_000)
-    assert floor.status == Status.STALLED and floor.iterations < 20_000
-    assert "stalled" in floor.reason and np.isfinite(floor.positions).all()
+    assert floor.status == Status.CONVERGED and floor.iterations < 200
+    assert floor.metrics["grad_norm_rel"] > 1e-12 and "rounding floor" in floor.reason
+    assert np.isfinite(floor.positions).all()
     assert default_tol(jnp.float32) > default_tol(jnp.float64)
 
 

@@ -109,13 +109,20 @@ def test_newton_element_hessians_match_autodiff():
     ref = initial_reference(x, structure, params)
     layout = hessian_layout(mesh, structure, sparse=False)
     n = layout.size
-    data = element_hessians(x, structure, params, ref, exact=True)
-    assembled = jax.ops.segment_sum(data, layout.slot, num_segments=n * n).reshape(n, n)
-    expected = jax.hessian(lambda y: energy(y.reshape(-1, 3), structure, params, ref))(x.ravel())
+    slot = layout.slot
+
+    @jax.jit  # compiled: op by op, these take several times longer
+    def matrices(x):
+        def assemble(exact):
+            data = element_hessians(x, structure, params, ref, exact=exact)
+            return jax.ops.segment_sum(data, slot, num_segments=n * n).reshape(n, n)
+
+        full = jax.hessian(lambda y: energy(y.reshape(-1, 3), structure, params, ref))(x.ravel())
+        return assemble(True), full, assemble(False)
+
+    assembled, expected, matrix = matrices(jnp.asarray(x))
     np.testing.assert_allclose(assembled, expected, atol=1e-10)
     # the convex part is positive semi-definite
-    convex = element_hessians(x, structure, params, ref, exact=False)
-    matrix = jax.ops.segment_sum(convex, layout.slot, num_segments=n * n).reshape(n, n)
     assert np.linalg.eigvalsh(np.asarray(matrix)).min() > -1e-12
 
 

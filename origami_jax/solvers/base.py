@@ -33,6 +33,8 @@ __all__ = [
     "positions",
     "objective",
     "gauge",
+    "gradient_floor",
+    "has_converged",
 ]
 
 
@@ -99,6 +101,24 @@ def next_status(converged: Array, finite: Array, stalled: Array) -> Array:
         Status.CONVERGED,
         jnp.where(~finite, Status.NONFINITE, jnp.where(stalled, Status.STALLED, Status.RUNNING)),
     ).astype(jnp.int32)
+
+
+def gradient_floor(problem: Problem) -> Array:
+    """The size below which a gradient entry is rounding noise: twice eps times the largest sum,
+    over a vertex's bars, of their stiffness ``axial / l0`` times length. Each bar force is
+    computed from ``l - l0``, whose rounding is eps ``l0`` even at rest; in float32 with stiff
+    bars this lies above ``tol`` times the start gradient, and no solver can go below it."""
+    params, bars = problem.params, problem.structure.bars
+    force = jnp.broadcast_to(params.stiffness.axial, params.rest_length.shape)
+    per_vertex = jax.ops.segment_sum(
+        jnp.concatenate([force, force]), bars.T.reshape(-1), num_segments=problem.start.shape[0]
+    )
+    return 2 * jnp.finfo(problem.start.dtype).eps * jnp.max(per_vertex)
+
+
+def has_converged(grad_max: Array, grad_max0: Array, problem: Problem) -> Array:
+    """``grad_norm_rel <= tol``, or the gradient is down to its rounding noise."""
+    return grad_max <= jnp.maximum(problem.tol * grad_max0, gradient_floor(problem))
 
 
 def run_steps(step, state, steps: Array):

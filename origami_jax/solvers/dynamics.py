@@ -52,6 +52,7 @@ from origami_jax.solvers.base import (
     Problem,
     Progress,
     Status,
+    has_converged,
     next_status,
     objective,
     positions,
@@ -315,7 +316,7 @@ class Dynamics:
         finite = jnp.isfinite(value) & jnp.isfinite(gmax) & jnp.all(jnp.isfinite(u))
         progress = s.progress.update(finite, gmax, value)
         ramped = s.iteration + 1 >= self.ramp_steps
-        converged = finite & ramped & (gmax <= problem.tol * s.grad_max0)
+        converged = finite & ramped & has_converged(gmax, s.grad_max0, problem)
         stalled = ramped & (progress.since_best >= self.patience)
         status = next_status(converged, finite, stalled)
         # Euler: on convergence keep the point the gradient was taken at; never keep non-finite

@@ -22,6 +22,7 @@ from origami_jax.solvers.base import (
     Problem,
     Progress,
     Status,
+    has_converged,
     next_status,
     objective,
     positions,
@@ -129,7 +130,7 @@ class Lbfgs:
             stalls = jnp.where(moved, 0, s.stalls + 1)
             progress = s.progress.update(finite, gmax, new_value)
             stalled = (stalls >= self.max_stalls) | (progress.since_best >= self.patience)
-            converged = at_rest | (finite & (gmax <= problem.tol * grad_max0))
+            converged = at_rest | (finite & has_converged(gmax, grad_max0, problem))
             status = next_status(converged, finite, stalled)
             # a non-finite step is not taken: the state keeps the last finite iterate
             keep = lambda new, old: jnp.where(finite, new, old)  # noqa: E731
