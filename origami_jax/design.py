@@ -64,9 +64,8 @@ from origami_jax.solvers.base import (
 from origami_jax.solvers.newton import (
     HessianLayout,
     Newton,
-    _gauge_blocks,
     _host_sparse_solve,
-    element_hessians,
+    gauged_hessian,
 )
 
 __all__ = [
@@ -122,14 +121,7 @@ class EquilibriumInfo(NamedTuple):
 def _hessian_values(problem: Problem, u: Array, reference: Array) -> Array:
     """Storage values of the gauged exact Hessian d^2E/du^2 in the solver's layout, with a
     stiffness-sized identity on the pinned (gauged-out) directions."""
-    layout: HessianLayout = problem.aux
-    x = positions(problem, u)
-    data = element_hessians(x, problem.structure, problem.params, reference, True)
-    data = _gauge_blocks(data, problem.structure, problem)
-    values = jax.ops.segment_sum(data, layout.slot, num_segments=layout.storage)
-    scale = jnp.mean(problem.params.stiffness.axial / problem.params.rest_length)
-    eye = jnp.eye(3, dtype=x.dtype)
-    return values.at[layout.diag_blocks[problem.pinned]].add(scale * (eye - problem.projectors))
+    return gauged_hessian(positions(problem, u), problem, reference, True)
 
 
 def _host_factor_check(indptr, indices, data):

@@ -335,23 +335,15 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
     return _project(proj, matrix).reshape(-1)
 
 
-def _gauge_blocks(data: Array, structure: Structure, problem: Problem) -> Array:
-    """Project every element block onto the pinned vertices' allowed motions."""
-    v = problem.start.shape[0]
-    eye = jnp.eye(3, dtype=data.dtype)
-    proj = jnp.broadcast_to(eye, (v, 3, 3)).at[problem.pinned].set(problem.projectors)
-    out, start = [], 0
-    for elements in (structure.bars, structure.hinges):
-        num, k = elements.shape
-        if num == 0:
-            continue
-        size = num * (3 * k) ** 2
-        block = data[start : start + size].reshape(num, k, 3, k, 3)
-        pe = proj[elements]  # (num, k, 3, 3)
-        block = jnp.einsum("naij,najbk,nbkl->naibl", pe, block, pe)
-        out.append(block.reshape(-1))
-        start += size
-    return jnp.concatenate(out)
+def gauged_hessian(x: Array, problem: Problem, reference: Array, exact: Array | bool) -> Array:
+    """:func:`assemble` plus a stiffness-sized identity on the pinned (gauged-out) directions, so
+    the system stays well scaled: the matrix Newton's step and the implicit derivatives of
+    :mod:`origami_jax.design` factor."""
+    layout: HessianLayout = problem.aux
+    values = assemble(x, problem, reference, exact)
+    scale = jnp.mean(problem.params.stiffness.axial / problem.params.rest_length)
+    eye = jnp.eye(3, dtype=x.dtype)
+    return values.at[layout.diag_blocks[problem.pinned]].add(scale * (eye - problem.projectors))
 
 
 def energy_noise(x: Array, problem: Problem, reference: Array, value: Array) -> Array:
@@ -470,13 +462,7 @@ class Newton:
         """Solve ``(H + mu diag H) d = -g``; (V, 3) step and whether the solve succeeded."""
         layout: HessianLayout = problem.aux
         x = positions(problem, s.u)
-        values = assemble(x, problem, s.reference, exact)
-        # the pinned directions: an identity of the bars' size, so the system stays well scaled
-        scale = jnp.mean(problem.params.stiffness.axial / problem.params.rest_length)
-        eye = jnp.eye(3, dtype=x.dtype)
-        values = values.at[layout.diag_blocks[problem.pinned]].add(
-            scale * (eye - problem.projectors)
-        )
+        values = gauged_hessian(x, problem, s.reference, exact)
         diag = values[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]]
         floor = jnp.finfo(x.dtype).eps * jnp.max(diag)
         values = values.at[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]].add(
