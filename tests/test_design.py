@@ -93,21 +93,22 @@ def miura():
     def loss(t):
         return jnp.vdot(w, solve(params._replace(target=t))[0])
 
+    value_and_grad = jax.jit(jax.value_and_grad(loss))  # one compiled solve for both
     return {
         "cp": cp,
         "params": params,
         "solve": solve,
         "loss": loss,
         "positions": jax.jit(lambda t: solve(params._replace(target=t))),
-        "grad": jax.jit(jax.grad(loss)),
+        "value": lambda t: value_and_grad(t)[0],
+        "grad": lambda t: value_and_grad(t)[1],
     }
 
 
 def test_miura_gradient_matches_central_differences(miura):
     """(The fixture's compiled gradient, shared with the tests below.)"""
     t = miura["params"].target
-    value = jax.jit(miura["loss"])
-    fd = fd_gradient(value, t)
+    fd = fd_gradient(miura["value"], t)
     err = np.max(np.abs(np.asarray(miura["grad"](t)) - fd)) / np.max(np.abs(fd))
     print(f"miura: gradient vs central differences, relative error {err:.2e}")
     assert err < 1e-6, err
@@ -124,11 +125,11 @@ def test_gradient_matches_central_differences(name):
         return jnp.vdot(w, x), (x, info)
 
     flat = jnp.asarray(cp.mesh.vertices)
-    g, (x0, info) = jax.jit(jax.grad(loss, has_aux=True))(params.target, flat)
+    value_and_grad = jax.jit(jax.value_and_grad(loss, has_aux=True))  # one compile for both
+    (_, (x0, info)), g = value_and_grad(params.target, flat)
     assert bool(info.ok), info
-    value = jax.jit(loss)
     # warm-started from the equilibrium: the same one, in a few iterations
-    fd = fd_gradient(lambda t: value(t, x0)[0], params.target)
+    fd = fd_gradient(lambda t: value_and_grad(t, x0)[0][0], params.target)
     err = np.max(np.abs(np.asarray(g) - fd)) / np.max(np.abs(fd))
     print(f"{name}: gradient vs central differences, relative error {err:.2e}")
     assert err < 1e-6, err
@@ -148,13 +149,13 @@ def test_gradient_other_parameters(miura):
         stiff = params.stiffness._replace(crease=v[1])
         return params._replace(percent=v[0], stiffness=stiff, rest_length=rest)
 
-    @jax.jit
     def loss(v):
         return jnp.vdot(w, solve(unflat(v), x0)[0])
 
+    value_and_grad = jax.jit(jax.value_and_grad(loss))  # one compile for both
     v0 = flat(params)
-    g = jax.jit(jax.grad(loss))(v0)
-    fd = fd_gradient(loss, v0, h=1e-6)
+    g = value_and_grad(v0)[1]
+    fd = fd_gradient(lambda v: value_and_grad(v)[0], v0, h=1e-6)
     assert np.allclose(g, fd, rtol=1e-5, atol=1e-7 * np.max(np.abs(fd))), (g, fd)
 
 
@@ -168,11 +169,19 @@ def test_assembled_hessian_is_the_gauged_hessian(monkeypatch):
     original = d._implicit
 
     def spy(params, u, reference, factor, scale, problem):
-        seen.update(problem=problem, u=u, reference=reference)
+        # the solve is compiled (op by op it takes several times longer): the values come
+        # back to the host through a callback
+        leaves, tree = jax.tree.flatten((problem, u, reference))
+        names = ("problem", "u", "reference")
+
+        def keep(*a):
+            seen.update(zip(names, tree.unflatten(a), strict=True))
+
+        jax.debug.callback(keep, *leaves)
         return original(params, u, reference, factor, scale, problem)
 
     monkeypatch.setattr(d, "_implicit", spy)
-    equilibrium_fn(cp)(params)
+    jax.block_until_ready(jax.jit(equilibrium_fn(cp))(params))
     problem, reference = seen["problem"], seen["reference"]
     u = seen["u"] + 0.01 * jnp.asarray(np.random.default_rng(0).normal(size=seen["u"].shape))
     n = u.size

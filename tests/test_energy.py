@@ -12,7 +12,12 @@ from origami_jax.energy import (
     make_params,
     make_structure,
 )
-from origami_jax.geometry import dihedral_angles, dihedral_gradients, fold_angles
+from origami_jax.geometry import (
+    atan2_dihedral,
+    dihedral_angles,
+    dihedral_gradients,
+    fold_angles,
+)
 
 SQUARE = dict(
     vertices=[[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0], [0.5, 1], [0.5, 0.5]],
@@ -141,21 +146,29 @@ def test_closed_form_dihedral_gradient_and_its_jacobian_match_autodiff():
     p = jnp.stack(corners)
 
     def one(q):
-        return dihedral_angles(q[None])[0]
+        return atan2_dihedral(q[None])[0]
 
     def closed(q):
         return dihedral_gradients(q[None])[0]
 
+    def custom(q):  # differentiates through dihedral_angles' custom_jvp
+        return dihedral_angles(q[None], jnp.ones(1))[0]
+
     @jax.jit  # compiled: op by op, the Hessians take several times longer
     def derivatives(p):
         g, h = jax.vmap(jax.grad(one))(p), jax.vmap(jax.hessian(one))(p)
-        return g, h, dihedral_gradients(p), jax.vmap(jax.jacfwd(closed))(p)
+        got = dihedral_gradients(p), jax.vmap(jax.jacfwd(closed))(p)
+        return g, h, got, (jax.vmap(jax.grad(custom))(p), jax.vmap(jax.hessian(custom))(p))
 
-    g, h, got_g, got_h = derivatives(p)
+    g, h, *got = derivatives(p)
     scale_g = jnp.max(jnp.abs(g), axis=(1, 2), keepdims=True)
     scale_h = jnp.max(jnp.abs(h), axis=(1, 2, 3, 4), keepdims=True)
-    assert float(jnp.max(jnp.abs(got_g - g) / scale_g)) < 1e-12
-    assert float(jnp.max(jnp.abs(got_h - h) / scale_h)) < 1e-10
+    for got_g, got_h in got:
+        assert float(jnp.max(jnp.abs(got_g - g) / scale_g)) < 1e-12
+        assert float(jnp.max(jnp.abs(got_h - h) / scale_h)) < 1e-10
+    x = jnp.asarray(np.random.default_rng(4).normal(size=(5, 3)))
+    hinges = jnp.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    assert float(jnp.max(jnp.abs(fold_angles(x, hinges) - atan2_dihedral(x[hinges])))) == 0.0
 
 
 def test_dihedral_continuous_through_pi():
@@ -204,3 +217,16 @@ def test_energy_differentiable_in_parameters():
         jnp.linspace(0, 1, 5)
     )
     assert batched.shape == (5,) and len(set(np.round(np.asarray(batched), 12))) == 5
+
+
+def test_collapsed_wing_moves_along_the_other_wings_normal():
+    # wing 2 lies on the axis 0 -> 1: its normal is undefined, the atan2 formula's derivative
+    # is an artefact there; the closed form moves it out along wing 3's normal
+    p = jnp.array([[[0.0, 0, 0], [0, 1, 0], [0, 0.5, 0], [0.8, 0.5, 0.3]]])
+    g = np.asarray(dihedral_gradients(p)[0])
+    n_right = np.cross(np.asarray(p[0, 3]), [0.0, 1.0, 0.0])
+    assert np.allclose(g[2], n_right / np.linalg.norm(n_right))  # axis length 1
+    assert np.allclose(g.sum(axis=0), 0.0, atol=1e-15)  # translations cost nothing
+    assert np.isfinite(g).all() and np.linalg.norm(g[3]) > 0
+    both = p.at[0, 3].set(jnp.array([0.0, 0.3, 0.0]))  # both wings collapsed: no direction
+    assert np.allclose(np.asarray(dihedral_gradients(both)), 0.0)
