@@ -203,7 +203,9 @@ def drive(solver, init, advance, problem, max_iter: int, max_time, record_every,
             break
         steps = min(chunk, max_iter - iterations)
         t_chunk = time.perf_counter()
-        state, m, x, angles = advance(state, problem, jnp.int32(steps))
+        # dispatch returns before the chunk has run: wait for it, or the clock (and the chunk
+        # sizes and history times taken from it) would read the dispatch, not the solve
+        state, m, x, angles = jax.block_until_ready(advance(state, problem, jnp.int32(steps)))
         now = time.perf_counter()
         samples.append(_sample(state, m, now - t0))
         iterations = int(np.max(samples[-1]["iteration"]))

@@ -187,3 +187,40 @@ def test_collapsed_start_is_refused_and_partial_collapse_recovers():
     result = fold(cp, start=start)
     assert np.isfinite(result.positions).all() and np.isfinite(result.fold_angles).all()
     assert result.strain_max < 1e-6 or not result.converged
+
+
+def test_time_limit_and_history_times_count_the_chunks_run_not_their_dispatch():
+    """``drive`` times each chunk once it has run (JAX dispatch returns at once): a solve
+    stops near ``max_time`` and its history's times are completion times."""
+    import time
+    from typing import NamedTuple
+
+    import jax
+
+    from origami_jax.fold import drive
+
+    class State(NamedTuple):
+        iteration: jax.Array
+        status: jax.Array
+        a: jax.Array
+
+    def init(problem):
+        return State(jnp.int32(0), jnp.int32(Status.RUNNING), jnp.eye(200) * 0.5)
+
+    @jax.jit
+    def advance(s, problem, steps):  # about a millisecond of work per step, never done
+        a = jax.lax.fori_loop(0, steps, lambda i, a: jnp.tanh(a @ a), s.a)
+        m = dict.fromkeys(
+            ("fold_angle_error_max", "strain_max", "energy", "grad_norm_rel"), a[0, 0]
+        )
+        return State(s.iteration + steps, s.status, a), m, a, a
+
+    jax.block_until_ready(advance(init(None), None, jnp.int32(1)))  # compile
+    t0 = time.perf_counter()
+    state, _, _, _, samples, out_of_time = drive(object(), init, advance, None, 10**9, 0.3, None)
+    elapsed = time.perf_counter() - t0
+    assert out_of_time and int(state.iteration) > 0
+    # chunks sized from dispatch times would grow without bound (seconds, here)
+    assert elapsed < 2.0, elapsed
+    times = [s["wall_time"] for s in samples]
+    assert times == sorted(times) and times[-1] <= elapsed
