@@ -338,7 +338,9 @@ def markdown(rows: list[dict], machine: str) -> str:
         f"Measured {time.strftime('%Y-%m-%d')} on {machine}; float64. Columns 'to 1e-3' etc.:"
         " wall time (s, compile excluded) until fold_angle_error_max (rad) first fell to that"
         " value, or, for patterns without an exact shape (the seed's scene, shared files),"
-        " grad_norm_rel; '-' never. 'vs newton': that time over Newton's on the same case.",
+        " grad_norm_rel; '-' never. 'vs newton': that time over Newton's on the same case."
+        " Solves under a second: median of 7 runs (Newton's 'to' times: of plain solves"
+        " stopped at that iteration), so differences of a few percent there are noise.",
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),
