@@ -129,6 +129,16 @@ def test_buckets_are_powers_of_two_with_room():
     assert to.vertices >= sizes.vertices + 4 and to.bars > sizes.bars
 
 
+def test_patterns_of_one_size_share_a_bucket():
+    # 9 vertices each; the Miura-ori has facet creases, the waterbomb none and twice the creases
+    miura, bomb = problem_sizes(patterns.miura_ori(2, 2)), problem_sizes(patterns.waterbomb(1, 1))
+    assert miura.vertices == bomb.vertices and (miura.creases, miura.facets) != (
+        bomb.creases,
+        bomb.facets,
+    )
+    assert bucket(miura) == bucket(bomb)
+
+
 def test_stream_compiles_once_per_bucket():
     cps = [patterns.miura_ori(2, 2, fold_angle=a) for a in (0.3, 0.9)] + [MIURAS[2]]
     before = compile_count()
