@@ -67,7 +67,6 @@ __all__ = [
     "HessianLayout",
     "hessian_layout",
     "layout_arrays",
-    "element_hessians",
     "element_blocks",
     "assemble",
 ]
@@ -77,7 +76,6 @@ __all__ = [
     jax.tree_util.register_dataclass,
     data_fields=[
         "order",
-        "slot",
         "diag_blocks",
         "indptr",
         "indices",
@@ -89,23 +87,21 @@ __all__ = [
 )
 @dataclass(frozen=True)
 class HessianLayout:
-    """Where every element-Hessian entry goes in the assembled (3V x 3V) matrix.
+    """Where the element Hessians go in the assembled (3V x 3V) matrix.
 
     ``order`` (3V,) position of each degree of freedom in the solved system (a fill-reducing
-    order for the sparse solve); ``slot`` (M,) the storage slot of each entry of the bar blocks
-    (E, 6, 6) then the hinge blocks (H, 12, 12), flattened; ``diag_blocks`` (V, 3, 3) the slots of
-    each vertex's diagonal block. Sparse: ``indptr``/``indices`` the symmetric CSR pattern in
-    that order and slots index its data. Dense: both empty and slots index the flat matrix.
+    order for the sparse solve); ``diag_blocks`` (V, 3, 3) the storage slots of each vertex's
+    diagonal block. Sparse: ``indptr``/``indices`` the symmetric CSR pattern in that order and
+    slots index its data. Dense: both empty and slots index the flat matrix.
 
-    The solver scatters 3 x 3 vertex blocks instead (a ninth of the indices), dense straight
-    into the (V, 3, V, 3) matrix; sparse into B stored blocks: ``blocks`` (K,) the stored block
+    The solver scatters 3 x 3 vertex blocks, dense straight into the (V, 3, V, 3) matrix;
+    sparse into B stored blocks: ``blocks`` (K,) the stored block
     of each vertex block of the bars (E, 2, 2) then hinges (H, 4, 4), ``block_vertices`` (B, 2)
     the row and column vertex of each, ``block_entries`` the entry of the flat (B, 3, 3) blocks
     that each CSR value takes (all three empty when dense).
     """
 
     order: Array
-    slot: Array
     diag_blocks: Array
     indptr: Array
     indices: Array
@@ -129,6 +125,14 @@ class HessianLayout:
 def _element_dofs(elements: np.ndarray) -> np.ndarray:
     """(n_el, 3 * k) degrees of freedom of elements given by k vertex indices each."""
     return (elements[:, :, None] * 3 + np.arange(3)).reshape(len(elements), -1)
+
+
+def _element_pairs(elements: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns of every (a, b) pair of indices within each element, elements of each
+    (n_el, k) array in turn (the entries their Hessian blocks touch)."""
+    rows = np.concatenate([np.repeat(e, e.shape[1], axis=1).ravel() for e in elements])
+    cols = np.concatenate([np.tile(e, (1, e.shape[1])).ravel() for e in elements])
+    return rows, cols
 
 
 def nested_dissection(xy: np.ndarray, adjacency: sp.csr_matrix, leaf: int = 16) -> np.ndarray:
@@ -170,9 +174,7 @@ def hessian_layout(mesh: Mesh, structure: Structure, sparse: bool) -> HessianLay
     hinges = np.asarray(structure.hinges)
     vertex_order = None
     if sparse:
-        elements = [bars] + ([hinges] if len(hinges) else [])
-        vr = np.concatenate([np.repeat(e, e.shape[1], axis=1).ravel() for e in elements])
-        vc = np.concatenate([np.tile(e, (1, e.shape[1])).ravel() for e in elements])
+        vr, vc = _element_pairs([bars] + ([hinges] if len(hinges) else []))
         v = mesh.num_vertices
         adjacency = sp.csr_matrix((np.ones(len(vr)), (vr, vc)), shape=(v, v))
         vertex_order = nested_dissection(mesh.vertices[:, :2], adjacency)
@@ -188,11 +190,8 @@ def layout_arrays(
     else dense (slots index the flat 3V x 3V matrix)."""
     v = num_vertices
     n = 3 * v
-    blocks = [_element_dofs(bars)]
-    if len(hinges):
-        blocks.append(_element_dofs(hinges))
-    rows = np.concatenate([np.repeat(b, b.shape[1], axis=1).ravel() for b in blocks])
-    cols = np.concatenate([np.tile(b, (1, b.shape[1])).ravel() for b in blocks])
+    elements = [bars] + ([hinges] if len(hinges) else [])
+    rows, cols = _element_pairs([_element_dofs(e) for e in elements])
     diag = np.arange(v)[:, None, None] * 3 + np.arange(3)
     diag_r = np.broadcast_to(diag, (v, 3, 3)).ravel()
     diag_c = np.broadcast_to(diag.transpose(0, 2, 1), (v, 3, 3)).ravel()
@@ -206,9 +205,7 @@ def layout_arrays(
     keys = order[np.concatenate([rows, diag_r])] * n + order[np.concatenate([cols, diag_c])]
     none = np.zeros(0, np.int32)
     if sparse:
-        elements = [bars] + ([hinges] if len(hinges) else [])
-        vr = np.concatenate([np.repeat(e, e.shape[1], axis=1).ravel() for e in elements])
-        vc = np.concatenate([np.tile(e, (1, e.shape[1])).ravel() for e in elements])
+        vr, vc = _element_pairs(elements)
         unique, slot = np.unique(keys, return_inverse=True)
         indptr = np.searchsorted(unique // n, np.arange(n + 1)).astype(np.int32)
         indices = (unique % n).astype(np.int32)
@@ -224,7 +221,6 @@ def layout_arrays(
     m = len(rows)
     return HessianLayout(
         order=order.astype(np.int32),
-        slot=slot[:m].astype(np.int32),
         diag_blocks=slot[m:].reshape(v, 3, 3).astype(np.int32),
         indptr=indptr,
         indices=indices,
@@ -271,15 +267,6 @@ def element_blocks(
         full = kl[:, None, None, None, None] * (gg + r * h)
         out.append(jnp.where(exact, full, kl[:, None, None, None, None] * gg))
     return out
-
-
-def element_hessians(
-    x: Array, structure: Structure, params, reference: Array, exact: Array | bool
-) -> Array:
-    """(M,) entries of the bar blocks (E, 6, 6) then hinge blocks (H, 12, 12), flattened (the
-    order of ``HessianLayout.slot``); see :func:`element_blocks`."""
-    blocks = element_blocks(x, structure, params, reference, exact)
-    return jnp.concatenate([b.reshape(-1) for b in blocks])
 
 
 def _scatter_blocks(out: Array, blocks: Array, index: Array) -> Array:
