@@ -162,16 +162,17 @@ def advance_fn(solver: Solver, num_edges: int):
     return advance
 
 
-def compiled(solver: Solver, problem, num_edges: int, wrap=None, key=()):
+def compiled(solver: Solver, problem, num_edges: int, wrap=None, key=(), problem_axes=0):
     """``(init, advance)`` compiled for this solver and these shapes (cached), and the compile
     time (0 when cached). ``wrap(fn, in_axes)`` transforms both before ``jit`` (``fold_batch``:
-    vmap and sharding; ``key`` tells its variants apart)."""
+    vmap and sharding, with ``problem_axes`` the problem's, a prefix pytree of 0 and None;
+    ``key`` tells its variants apart)."""
     cache_key = (solver, _signature(problem), num_edges, key)
     if cache_key in _CACHE:
         return _CACHE[cache_key], 0.0
     init, advance = solver.init, advance_fn(solver, num_edges)
     if wrap is not None:
-        init, advance = wrap(init, (0,)), wrap(advance, (0, 0, None))
+        init, advance = wrap(init, (problem_axes,)), wrap(advance, (0, problem_axes, None))
     t0 = time.perf_counter()
     init_c = jax.jit(init).lower(problem).compile()
     state_shape = jax.eval_shape(init, problem)

@@ -450,7 +450,9 @@ def _triangulate(points: np.ndarray, face: tuple[int, ...], k: int) -> list[tupl
                 [np.linalg.norm(pb - pa), np.linalg.norm(pc - pb), np.linalg.norm(pa - pc)]
             )
             q = area2 / (sides[2] ** 2)  # larger is rounder
-            if q > best_q:
+            # ties (a parallelogram's two ears) go to the first ear, not to rounding, so the
+            # triangulation of one pattern does not change with small changes of its geometry
+            if q > best_q * (1 + 1e-9) + 1e-300:
                 best, best_q = s, q
         if best < 0:
             raise PatternError(f"face {k}: is not a simple polygon (cannot be triangulated)")

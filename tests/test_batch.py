@@ -59,6 +59,47 @@ def test_one_pattern_many_parameter_sets():
     assert results[0].energy != pytest.approx(results[1].energy, rel=1e-3)
 
 
+# one topology, three geometries: folded unpadded, with shared index arrays
+VARIANTS = [
+    patterns.miura_ori(2, 2, sector_angle=s, fold_angle=a)
+    for s, a in ((1.0, 0.7), (1.2, 1.4), (0.9, 2.1))
+]
+
+
+def test_shared_topology_equals_single_folds():
+    results = fold_batch(VARIANTS, share_topology=True, progress=False)
+    for cp, r in zip(VARIANTS, results, strict=True):
+        single = fold(cp)
+        assert r.pattern is cp and r.converged and single.converged
+        assert r.iterations == single.iterations
+        assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
+        np.testing.assert_allclose(r.fold_angles, single.fold_angles, atol=1e-9)
+        for name in ("fold_angle_error_max", "fold_angle_error_mean", "strain_mean", "energy"):
+            assert getattr(r, name) == pytest.approx(getattr(single, name), rel=1e-6, abs=1e-12)
+
+
+def test_which_problems_share_their_topology(monkeypatch):
+    plans = []
+    monkeypatch.setattr(
+        batch_module,
+        "_run_chunk",
+        lambda chunk, to, size, shared, *a: plans.append((len(chunk), shared)),
+    )
+    monkeypatch.setattr(batch_module, "SHARED_TOPOLOGY_MIN", 3)
+    # three of one topology reach the minimum, the seed's scene alone does not
+    fold_batch(VARIANTS + [SEED], progress=False)
+    assert sorted(plans) == [(1, False), (3, True)]
+    plans.clear()
+    fold_batch(VARIANTS[:2] + [SEED], progress=False)
+    assert sorted(plans) == [(1, False), (2, False)]  # one bucket each
+    plans.clear()
+    fold_batch(SEED, percent=[0.5, 1.0], progress=False)  # one pattern: always shared
+    assert plans == [(2, True)]
+    plans.clear()
+    fold_batch(VARIANTS, share_topology=False, progress=False)
+    assert plans == [(3, False)]
+
+
 def _padded_problem(cp, grow: int):
     member = batch_module._member(0, cp, 0.7, None, None, 1e-10, jnp.float64)
     to = bucket(member.sizes)
@@ -190,6 +231,10 @@ SHARDED = textwrap.dedent(
     cps = [patterns.miura_ori(2, 2, fold_angle=a) for a in (0.5, 0.9, 1.3)]
     two = fold_batch(cps, progress=False)
     one = fold_batch(cps, devices=jax.devices()[:1], progress=False)
+    # one pattern, several parameter sets: shared index arrays, replicated on both devices
+    percents = [0.4, 0.7, 1.0]
+    two += fold_batch(cps[0], percent=percents, progress=False)
+    one += fold_batch(cps[0], percent=percents, devices=jax.devices()[:1], progress=False)
     for a, b in zip(two, one):
         assert a.converged and b.converged
         assert np.max(np.abs(a.positions - b.positions)) <= 1e-12, (a, b)

@@ -533,3 +533,13 @@ def test_every_generator_returns_a_named_validated_pattern():
 def test_argument_validation(call, match):
     with pytest.raises(PatternError, match=match):
         call()
+
+
+def test_one_pattern_keeps_its_triangulation_across_geometries():
+    """A parallelogram's two ears tie; the tie goes to the first, not to rounding, so Miura-ori
+    of other sector angles share one mesh topology (and fold_batch's shared index arrays)."""
+    first = miura_ori(4, 4).mesh
+    for gamma in np.radians(np.linspace(50, 85, 36)):
+        mesh = miura_ori(4, 4, sector_angle=gamma, fold_angle=2.0).mesh
+        np.testing.assert_array_equal(mesh.triangles, first.triangles)
+        np.testing.assert_array_equal(mesh.edges, first.edges)

@@ -230,11 +230,11 @@ def layout_arrays(
     )
 
 
-def _hinge_angle_derivatives(p: Array, reference: Array) -> tuple[Array, Array, Array]:
-    """Fold angle, its gradient (H, 4, 3) and Hessian (H, 4, 3, 4, 3) for each hinge."""
+def _hinge_angle_curvature(p: Array, reference: Array) -> tuple[Array, Array]:
+    """Fold angle and its Hessian (H, 4, 3, 4, 3) for each hinge."""
     # the Hessian is jacfwd of the closed-form gradient: a tenth of the cost of jacfwd(grad)
     hess = jax.vmap(jax.jacfwd(lambda q: dihedral_gradients(q[None])[0]))(p)
-    return dihedral_angles(p, reference), dihedral_gradients(p), hess
+    return dihedral_angles(p, reference), hess
 
 
 def element_blocks(
@@ -260,12 +260,21 @@ def element_blocks(
     out = [sign[None, :, None, :, None] * a[:, None, :, None, :]]
     if structure.hinges.shape[0]:
         goal, stiffness = hinge_goals(structure, params)
-        rho, g, h = _hinge_angle_derivatives(x[structure.hinges], reference)
-        kl = stiffness * l0[structure.hinge_bars]
-        gg = g[:, :, :, None, None] * g[:, None, None, :, :]
-        r = (rho - goal)[:, None, None, None, None]
-        full = kl[:, None, None, None, None] * (gg + r * h)
-        out.append(jnp.where(exact, full, kl[:, None, None, None, None] * gg))
+        q = x[structure.hinges]
+        g = dihedral_gradients(q)
+        kl = (stiffness * l0[structure.hinge_bars])[:, None, None, None, None]
+        gg = kl * g[:, :, :, None, None] * g[:, None, None, :, :]
+
+        def with_curvature():
+            # the angle's own Hessian is most of an iteration's work on small patterns: only
+            # when asked (``lax.cond`` skips it unbatched; vmapped it is a select)
+            rho, h = _hinge_angle_curvature(q, reference)
+            return gg + kl * (rho - goal)[:, None, None, None, None] * h
+
+        if isinstance(exact, bool):
+            out.append(with_curvature() if exact else gg)
+        else:
+            out.append(jax.lax.cond(exact, with_curvature, lambda: gg))
     return out
 
 
@@ -283,11 +292,15 @@ def _scatter_blocks(out: Array, blocks: Array, index: Array) -> Array:
     )
 
 
-def _project(proj: Array, matrix: Array) -> Array:
-    """``P matrix P`` for a (V, 3, V, 3) matrix and block-diagonal P given by ``proj``
-    (V, 3, 3) (broadcast sums: XLA's CPU einsum of such small dims is several times slower)."""
-    matrix = jnp.sum(proj[:, :, :, None, None] * matrix[:, None], axis=2)
-    return jnp.sum(matrix[..., None] * proj[None, None], axis=3)
+def _project_pinned(matrix: Array, pinned: Array, projectors: Array) -> Array:
+    """``P matrix P`` for a (V, 3, V, 3) matrix and P block-diagonal: ``projectors`` (P, 3, 3)
+    at the ``pinned`` vertices (distinct), identity elsewhere; only their rows and columns
+    change (broadcast sums: XLA's CPU einsum of such small dims is several times slower)."""
+    rows = jnp.sum(projectors[:, :, :, None, None] * matrix[pinned][:, None], axis=2)
+    matrix = matrix.at[pinned].set(rows)
+    cols = matrix[:, :, pinned]
+    cols = jnp.sum(cols[..., None] * projectors[None, None], axis=3)
+    return matrix.at[:, :, pinned].set(cols)
 
 
 def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) -> Array:
@@ -300,10 +313,10 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
     structure = problem.structure
     blocks = element_blocks(x, structure, problem.params, reference, exact)
     v = problem.start.shape[0]
-    eye = jnp.eye(3, dtype=x.dtype)
-    proj = jnp.broadcast_to(eye, (v, 3, 3)).at[problem.pinned].set(problem.projectors)
     elements = [structure.bars, structure.hinges][: len(blocks)]
     if layout.sparse:
+        eye = jnp.eye(3, dtype=x.dtype)
+        proj = jnp.broadcast_to(eye, (v, 3, 3)).at[problem.pinned].set(problem.projectors)
         num = layout.block_vertices.shape[0]
         matrix, start = jnp.zeros((num, 3, 3), x.dtype), 0
         for part, e in zip(blocks, elements, strict=True):
@@ -319,7 +332,7 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
     for part, e in zip(blocks, elements, strict=True):
         index = jnp.stack(jnp.broadcast_arrays(e[:, :, None], e[:, None, :]), axis=-1)
         matrix = _scatter_blocks(matrix, part, index)
-    return _project(proj, matrix).reshape(-1)
+    return _project_pinned(matrix, problem.pinned, problem.projectors).reshape(-1)
 
 
 def gauged_hessian(x: Array, problem: Problem, reference: Array, exact: Array | bool) -> Array:
