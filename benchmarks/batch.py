@@ -6,11 +6,14 @@ compile count of a stream of patterns of random sizes.
 
 Problems: 1,024 Miura-ori 4 x 4 with random sector angles (50 to 80 degrees) and fold angles
 (0.3 to 2.5 rad), and 1,024 waterbomb tessellations 2 x 2 with random fold angles (0.3 to 2.5
-rad). Each solver folds the whole set with one ``fold_batch`` call (after a first call that
-compiles; compile time reported apart) and a sample of 64 of them one by one with ``fold``
-(compiled beforehand); the ratio is folds per second of the batch over those of the loop,
-measured in the same run. The stream: 100 patterns of random kinds and sizes, each folded by
-its own ``fold_batch`` call, as they would arrive one at a time; we count the compilations.
+rad); each set is of one topology, so fold_batch vmaps it unpadded with shared index arrays
+(its default); Newton folds each set once more padded to its size bucket
+(``share_topology=False``, as a set of mixed patterns would be). Each solver folds the whole
+set with one ``fold_batch`` call (after a first call that compiles; compile time reported
+apart) and a sample of 64 of them one by one with ``fold`` (compiled beforehand); the ratio is
+folds per second of the batch over those of the loop, measured in the same run. The stream:
+100 patterns of random kinds and sizes, each folded by its own ``fold_batch`` call, as they
+would arrive one at a time; we count the compilations.
 Writes ``batch_summary.csv``, ``batch_results.md`` and ``batch_throughput.png``.
 """
 
@@ -63,13 +66,15 @@ def stream(n: int, seed: int = 1) -> list:
     return out
 
 
-def throughput(cps: list, solver: str, loop_sample: int) -> dict:
-    first = fold_batch(cps[:1], solver=solver, progress=False)  # compiles the B = 1 shape
+def throughput(cps: list, solver: str, loop_sample: int, share_topology=None) -> dict:
+    """``share_topology``: as in fold_batch (None: the default, shared index arrays for a set
+    of one topology; False: padded to the size buckets)."""
+    kw = {"solver": solver, "progress": False, "share_topology": share_topology}
     t0 = time.perf_counter()
-    warm = fold_batch(cps, solver=solver, progress=False)  # compiles the chunk shape
+    warm = fold_batch(cps, **kw)  # compiles the chunk shape
     first_call = time.perf_counter() - t0
     t0 = time.perf_counter()
-    results = fold_batch(cps, solver=solver, progress=False)
+    results = fold_batch(cps, **kw)
     batch_time = time.perf_counter() - t0
     compile_time = max(r.compile_time for r in warm)
     fold(cps[0], solver=solver)  # compile the single solve
@@ -80,11 +85,14 @@ def throughput(cps: list, solver: str, loop_sample: int) -> dict:
         float(np.max(np.abs(r.positions - s.positions)) / cp.diameter)
         for r, s, cp in zip(results, singles, cps, strict=False)
     )
-    del first
+    sizes = problem_sizes(cps[0])
+    topologies = len({(cp.mesh.triangles.tobytes(), cp.mesh.edges.tobytes()) for cp in cps})
+    shared = share_topology is not False and topologies == 1
     return {
         "solver": solver,
         "problems": len(cps),
-        "padded_vertices": bucket(problem_sizes(cps[0])).vertices,
+        "layout": "shared topology" if shared else "size buckets",
+        "solved_vertices": sizes.vertices if shared else bucket(sizes).vertices,
         "converged": sum(r.converged for r in results),
         "mean_iterations": float(np.mean([r.iterations for r in results])),
         "compile_time_s": compile_time,
@@ -102,8 +110,10 @@ def main(out: Path, quick: bool = False) -> list[dict]:
     n = 64 if quick else 1024
     rows = []
     for name, cps in problem_sets(n).items():
-        for solver in SOLVERS:
-            row = {"set": name, **throughput(cps, solver, 16 if quick else 64)}
+        # the solvers with the default (one topology: shared index arrays), then Newton
+        # padded to its size bucket as before, for the ratio of the two in one run
+        for solver, share in [(s, None) for s in SOLVERS] + [("newton", False)]:
+            row = {"set": name, **throughput(cps, solver, 16 if quick else 64, share)}
             rows.append(row)
             print(
                 f"{name:14s} {solver:9s} batch {row['batch_folds_per_s']:8.1f} folds/s  loop "
@@ -180,16 +190,17 @@ def write(rows: list[dict], out: Path) -> None:
         f" {device.platform}: {device.device_kind}; float64. Batch: one fold_batch call (compile"
         " excluded); loop: fold() one by one on 64 of them (compiled beforehand).",
         "",
-        "| set | solver | problems | padded vertices | converged | mean iterations | compile (s)"
-        " | batch (s) | batch folds/s | loop folds/s | batch / loop | max position diff vs"
-        " single (of diameter) |",
-        "|" + "---|" * 12,
+        "| set | solver | problems | layout | vertices solved | converged | mean iterations |"
+        " compile (s) | batch (s) | batch folds/s | loop folds/s | batch / loop | max position"
+        " diff vs single (of diameter) |",
+        "|" + "---|" * 13,
     ]
     for r in rows:
         if "compiles" in r:
             continue
         lines.append(
-            f"| {r['set']} | {r['solver']} | {r['problems']} | {r['padded_vertices']} | "
+            f"| {r['set']} | {r['solver']} | {r['problems']} | {r['layout']} | "
+            f"{r['solved_vertices']} | "
             f"{r['converged']} | {r['mean_iterations']:.0f} | {r['compile_time_s']:.1f} | "
             f"{r['batch_time_s']:.2f} | {r['batch_folds_per_s']:.0f} | "
             f"{r['loop_folds_per_s']:.0f} | {r['speedup']:.1f} | "
@@ -212,7 +223,10 @@ def write(rows: list[dict], out: Path) -> None:
         return
     data = [r for r in rows if "compiles" not in r]
     fig, ax = plt.subplots(figsize=(6, 3.5))
-    labels = [f"{r['set']}\n{r['solver']}" for r in data]
+    labels = [
+        f"{r['set']}\n{r['solver']}" + ("\n(buckets)" if r["layout"] == "size buckets" else "")
+        for r in data
+    ]
     pos = np.arange(len(data))
     ax.bar(pos - 0.2, [r["batch_folds_per_s"] for r in data], 0.4, label="fold_batch")
     ax.bar(pos + 0.2, [r["loop_folds_per_s"] for r in data], 0.4, label="loop of fold()")

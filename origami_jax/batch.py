@@ -17,7 +17,8 @@ one :class:`~origami_jax.fold.FoldResult` per problem, in input order.
 Problems that share one **topology** (the same pattern folded with other parameters, or
 variants of one pattern with other geometry) are vmapped directly instead, unpadded, with one
 copy of their index arrays for the whole chunk: the batched gathers and scatters then move
-whole rows of the batch, several times faster than per-member indices on a CPU. That is the
+whole rows of the batch instead of one member's entries at a time (1.2 to 1.7 times the folds
+per second of the same sets padded, in ``benchmarks/batch.py``). That is the
 default for a topology with at least :data:`SHARED_TOPOLOGY_MIN` problems in one call (or one
 pattern given for many parameter sets); it compiles once per topology instead of per bucket
 (``share_topology`` chooses).
@@ -253,10 +254,19 @@ def _topology(member: _Member) -> tuple:
     return (member.sizes, st.num_creases, *(np.asarray(a).tobytes() for a in arrays))
 
 
-def _shared(member: _Member, solver: Solver) -> Problem:
-    """The member's problem as it is (NumPy leaves), with its solver's static data."""
-    problem = member.problem
-    return replace(problem, aux=_padded_aux(solver, member, problem, member.sizes))
+def _shared(member: _Member, solver: Solver, layout) -> Problem:
+    """The member's problem unpadded (NumPy leaves), stiffnesses as per-element arrays (so
+    scalar and per-element ones stack), with its solver's static data (Newton: ``layout``,
+    built once for the chunk)."""
+    problem, s = member.problem, member.sizes
+    k = problem.params.stiffness
+    stiffness = Stiffness(
+        axial=np.broadcast_to(k.axial, (s.bars,)),
+        facet=np.broadcast_to(k.facet, (s.facets,)),
+        crease=np.broadcast_to(k.crease, (s.creases,)),
+    )
+    aux = layout if isinstance(solver, Newton) else _padded_aux(solver, member, problem, s)
+    return replace(problem, params=problem.params._replace(stiffness=stiffness), aux=aux)
 
 
 def _problem_axes(solver: Solver) -> Problem:
@@ -342,7 +352,7 @@ def fold_batch(
         sizes and topologies.
       percent, stiffness: one value for all, or a sequence with one per problem.
       starts: ``None`` or a sequence with one start (V_mesh, 3) or ``None`` per problem.
-      solver: ``"newton"`` (dense Cholesky per member; padded sizes up to
+      solver: ``"newton"`` (dense Cholesky per member; solved (padded) sizes up to
         ``BATCH_DENSE_MAX`` vertices), ``"lbfgs"``, ``"dynamics"``, or a solver object.
       tol, max_iter, dtype, max_time: as in :func:`~origami_jax.fold`; ``max_time`` applies
         to each chunk.
@@ -413,7 +423,7 @@ def fold_batch(
         for to, _ in groups:
             if to.vertices > BATCH_DENSE_MAX:
                 raise ValueError(
-                    f"fold_batch(): a problem of {to.vertices} padded vertices is too large for "
+                    f"fold_batch(): a problem of {to.vertices} (padded) vertices is too large for "
                     f"batched dense Newton (<= {BATCH_DENSE_MAX}); use fold() or "
                     "solver='lbfgs'"
                 )
@@ -465,7 +475,11 @@ def _run_chunk(
     filled = chunk + [chunk[0]] * (size - len(chunk))
     axes = _problem_axes(solver) if shared else 0
     if shared:
-        problems = [_shared(m, solver) for m in filled]
+        first = chunk[0]
+        layout = (
+            _padded_aux(solver, first, first.problem, to) if isinstance(solver, Newton) else None
+        )
+        problems = [_shared(m, solver, layout) for m in filled]
         # leaves the chunk shares (axis None) are taken once, the rest stacked
         stacked = jax.tree.map(
             lambda a, *rest: rest[0] if a is None else _stack(*rest),

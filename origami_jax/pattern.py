@@ -450,8 +450,8 @@ def _triangulate(points: np.ndarray, face: tuple[int, ...], k: int) -> list[tupl
                 [np.linalg.norm(pb - pa), np.linalg.norm(pc - pb), np.linalg.norm(pa - pc)]
             )
             q = area2 / (sides[2] ** 2)  # larger is rounder
-            # ties (a parallelogram's two ears) go to the first ear, not to rounding, so the
-            # triangulation of one pattern does not change with small changes of its geometry
+            # ties (a parallelogram's two ears) go to the first ear, not to rounding, so
+            # variants of one pattern keep one triangulation (where no other ear overtakes)
             if q > best_q * (1 + 1e-9) + 1e-300:
                 best, best_q = s, q
         if best < 0:

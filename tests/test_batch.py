@@ -258,3 +258,15 @@ def test_no_warning_on_a_plain_batch():
         warnings.simplefilter("error")
         (r,) = fold_batch(MIURAS[:1], progress=False)
     assert r.converged
+
+
+def test_shared_topology_stacks_scalar_and_per_element_stiffness():
+    cp = SEED  # strained at equilibrium: the axial stiffness changes the result
+    per_bar = np.linspace(0.5, 2.0, cp.mesh.num_edges)
+    stiffness = [None, {"axial": per_bar}]
+    results = fold_batch(cp, stiffness=stiffness, progress=False)
+    for k, r in zip(stiffness, results, strict=True):
+        single = fold(cp, stiffness=k)
+        assert r.converged and single.converged
+        assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
+    assert results[0].energy != pytest.approx(results[1].energy, rel=1e-6)

@@ -263,18 +263,18 @@ def element_blocks(
         q = x[structure.hinges]
         g = dihedral_gradients(q)
         kl = (stiffness * l0[structure.hinge_bars])[:, None, None, None, None]
-        gg = kl * g[:, :, :, None, None] * g[:, None, None, :, :]
+        gg = g[:, :, :, None, None] * g[:, None, None, :, :]
 
         def with_curvature():
             # the angle's own Hessian is most of an iteration's work on small patterns: only
             # when asked (``lax.cond`` skips it unbatched; vmapped it is a select)
             rho, h = _hinge_angle_curvature(q, reference)
-            return gg + kl * (rho - goal)[:, None, None, None, None] * h
+            return kl * (gg + (rho - goal)[:, None, None, None, None] * h)
 
         if isinstance(exact, bool):
-            out.append(with_curvature() if exact else gg)
+            out.append(with_curvature() if exact else kl * gg)
         else:
-            out.append(jax.lax.cond(exact, with_curvature, lambda: gg))
+            out.append(jax.lax.cond(exact, with_curvature, lambda: kl * gg))
     return out
 
 
@@ -294,8 +294,15 @@ def _scatter_blocks(out: Array, blocks: Array, index: Array) -> Array:
 
 def _project_pinned(matrix: Array, pinned: Array, projectors: Array) -> Array:
     """``P matrix P`` for a (V, 3, V, 3) matrix and P block-diagonal: ``projectors`` (P, 3, 3)
-    at the ``pinned`` vertices (distinct), identity elsewhere; only their rows and columns
-    change (broadcast sums: XLA's CPU einsum of such small dims is several times slower)."""
+    at the ``pinned`` vertices (a vertex repeated carries the same projector: batch padding),
+    identity elsewhere; only their rows and columns change (broadcast sums: XLA's CPU einsum
+    of such small dims is several times slower)."""
+    v = matrix.shape[0]
+    if pinned.shape[0] >= v:  # batch padding pins every padding vertex: project all at once
+        eye = jnp.eye(3, dtype=matrix.dtype)
+        proj = jnp.broadcast_to(eye, (v, 3, 3)).at[pinned].set(projectors)
+        matrix = jnp.sum(proj[:, :, :, None, None] * matrix[:, None], axis=2)
+        return jnp.sum(matrix[..., None] * proj[None, None], axis=3)
     rows = jnp.sum(projectors[:, :, :, None, None] * matrix[pinned][:, None], axis=2)
     matrix = matrix.at[pinned].set(rows)
     cols = matrix[:, :, pinned]
