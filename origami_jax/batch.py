@@ -141,6 +141,15 @@ def _pad_rows(a: np.ndarray, n: int, fill) -> np.ndarray:
     return np.concatenate([a, pad])
 
 
+def _per_element(k: Stiffness, sizes: BatchSizes) -> Stiffness:
+    """Stiffnesses as one value per element (scalars broadcast), so problems stack."""
+    return Stiffness(
+        axial=np.broadcast_to(k.axial, (sizes.bars,)),
+        facet=np.broadcast_to(k.facet, (sizes.facets,)),
+        crease=np.broadcast_to(k.crease, (sizes.creases,)),
+    )
+
+
 def _padded(member: _Member, to: BatchSizes, solver: Solver) -> Problem:
     """The member's problem padded to the sizes ``to`` (NumPy leaves)."""
     p, s = member.problem, member.sizes
@@ -170,11 +179,11 @@ def _padded(member: _Member, to: BatchSizes, solver: Solver) -> Problem:
         free_bars=_pad_rows(st.free_bars, to.free, s.bars).astype(np.int32),
         num_creases=to.creases,
     )
-    k = prm.stiffness
+    k = _per_element(prm.stiffness, s)
     stiffness = Stiffness(
-        axial=_pad_rows(np.broadcast_to(k.axial, (s.bars,)), to.bars, 0.0),
-        facet=_pad_rows(np.broadcast_to(k.facet, (s.facets,)), to.facets, 0.0),
-        crease=_pad_rows(np.broadcast_to(k.crease, (s.creases,)), to.creases, 0.0),
+        axial=_pad_rows(k.axial, to.bars, 0.0),
+        facet=_pad_rows(k.facet, to.facets, 0.0),
+        crease=_pad_rows(k.crease, to.creases, 0.0),
     )
     params = FoldParams(
         target=_pad_rows(prm.target, to.creases, 0.0),
@@ -251,7 +260,7 @@ def _topology(member: _Member) -> tuple:
     """What a compiled solve with shared index arrays needs equal: the structure's arrays."""
     st = member.problem.structure
     arrays = (st.bars, st.hinges, st.hinge_bars, st.free, st.free_bars)
-    return (member.sizes, st.num_creases, *(np.asarray(a).tobytes() for a in arrays))
+    return (member.sizes, *(np.asarray(a).tobytes() for a in arrays))
 
 
 def _shared(member: _Member, solver: Solver, layout) -> Problem:
@@ -259,12 +268,7 @@ def _shared(member: _Member, solver: Solver, layout) -> Problem:
     scalar and per-element ones stack), with its solver's static data (Newton: ``layout``,
     built once for the chunk)."""
     problem, s = member.problem, member.sizes
-    k = problem.params.stiffness
-    stiffness = Stiffness(
-        axial=np.broadcast_to(k.axial, (s.bars,)),
-        facet=np.broadcast_to(k.facet, (s.facets,)),
-        crease=np.broadcast_to(k.crease, (s.creases,)),
-    )
+    stiffness = _per_element(problem.params.stiffness, s)
     aux = layout if isinstance(solver, Newton) else _padded_aux(solver, member, problem, s)
     return replace(problem, params=problem.params._replace(stiffness=stiffness), aux=aux)
 

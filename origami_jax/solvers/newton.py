@@ -292,6 +292,12 @@ def _scatter_blocks(out: Array, blocks: Array, index: Array) -> Array:
     )
 
 
+def _vertex_projectors(v: int, pinned: Array, projectors: Array) -> Array:
+    """(V, 3, 3) each vertex's gauge projector: ``projectors`` at ``pinned``, else identity."""
+    eye = jnp.eye(3, dtype=projectors.dtype)
+    return jnp.broadcast_to(eye, (v, 3, 3)).at[pinned].set(projectors)
+
+
 def _project_pinned(matrix: Array, pinned: Array, projectors: Array) -> Array:
     """``P matrix P`` for a (V, 3, V, 3) matrix and P block-diagonal: ``projectors`` (P, 3, 3)
     at the ``pinned`` vertices (a vertex repeated carries the same projector: batch padding),
@@ -299,8 +305,7 @@ def _project_pinned(matrix: Array, pinned: Array, projectors: Array) -> Array:
     of such small dims is several times slower)."""
     v = matrix.shape[0]
     if pinned.shape[0] >= v:  # batch padding pins every padding vertex: project all at once
-        eye = jnp.eye(3, dtype=matrix.dtype)
-        proj = jnp.broadcast_to(eye, (v, 3, 3)).at[pinned].set(projectors)
+        proj = _vertex_projectors(v, pinned, projectors)
         matrix = jnp.sum(proj[:, :, :, None, None] * matrix[:, None], axis=2)
         return jnp.sum(matrix[..., None] * proj[None, None], axis=3)
     rows = jnp.sum(projectors[:, :, :, None, None] * matrix[pinned][:, None], axis=2)
@@ -322,8 +327,7 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
     v = problem.start.shape[0]
     elements = [structure.bars, structure.hinges][: len(blocks)]
     if layout.sparse:
-        eye = jnp.eye(3, dtype=x.dtype)
-        proj = jnp.broadcast_to(eye, (v, 3, 3)).at[problem.pinned].set(problem.projectors)
+        proj = _vertex_projectors(v, problem.pinned, problem.projectors)
         num = layout.block_vertices.shape[0]
         matrix, start = jnp.zeros((num, 3, 3), x.dtype), 0
         for part, e in zip(blocks, elements, strict=True):
