@@ -16,18 +16,19 @@ one :class:`~origami_jax.fold.FoldResult` per problem, in input order.
 
 Problems that share one **topology** (the same pattern folded with other parameters, or
 variants of one pattern with other geometry) are vmapped directly instead, unpadded, with one
-copy of their index arrays for the whole chunk: the batched gathers and scatters then move
+copy of their index arrays for all the slots: the batched gathers and scatters then move
 whole rows of the batch instead of one member's entries at a time (1.1 to 1.7 times the folds
 per second of the same sets padded, in ``benchmarks/batch.py``). That is the
 default for a topology with at least :data:`SHARED_TOPOLOGY_MIN` problems in one call (or one
 pattern given for many parameter sets); it compiles once per topology instead of per bucket
 (``share_topology`` chooses).
 
-The batch runs in chunks of a fixed size (the last one filled with copies, whose results are
-dropped), each chunk one vmapped solve in which every member stops on its own tolerance; with
-several devices each chunk is split across them (``jax.shard_map``), each device running its
-own members to their own end. Between chunks the host shows progress; an interrupted batch
-(Ctrl-C) returns the chunks already done.
+Problems of one compiled shape run in a fixed number of **slots** (``chunk_size``), each call
+one vmapped solve of some iterations in which every member stops on its own tolerance; between
+calls the members that have stopped hand in their results and their slots take the next
+problems of the queue (continuous batching: nobody waits for the slowest member of a fixed
+chunk). With several devices the slots are split across them (``jax.shard_map``). Between
+calls the host shows progress; an interrupted batch (Ctrl-C) returns the problems already done.
 
 Example:
   >>> from origami_jax import fold_batch, patterns
@@ -41,7 +42,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import NamedTuple
@@ -51,12 +52,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from origami_jax.energy import FoldParams, Stiffness, param_arrays, structure_arrays
-from origami_jax.fold import FoldResult, _reason, compiled, default_tol, drive, history_of
+from origami_jax.fold import FoldResult, _reason, _sample, compiled, default_tol, history_of
 from origami_jax.metrics import METRIC_NAMES
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
 from origami_jax.solvers import Dynamics, Newton, Solver, Status, get_solver
-from origami_jax.solvers.base import Problem, default_max_step, rigid_gauge
+from origami_jax.solvers.base import Problem, check_start, default_max_step, rigid_gauge
 from origami_jax.solvers.dynamics import lumped_mass
 from origami_jax.solvers.newton import layout_arrays
 
@@ -266,7 +267,7 @@ def _topology(member: _Member) -> tuple:
 def _shared(member: _Member, solver: Solver, layout) -> Problem:
     """The member's problem unpadded (NumPy leaves), stiffnesses as per-element arrays (so
     scalar and per-element ones stack), with its solver's static data (Newton: ``layout``,
-    built once for the chunk)."""
+    built once for all slots)."""
     problem, s = member.problem, member.sizes
     stiffness = _per_element(problem.params.stiffness, s)
     aux = layout if isinstance(solver, Newton) else _padded_aux(solver, member, problem, s)
@@ -274,7 +275,7 @@ def _shared(member: _Member, solver: Solver, layout) -> Problem:
 
 
 def _problem_axes(solver: Solver) -> Problem:
-    """vmap axes of a chunk with shared topology: index arrays (and Newton's layout, built
+    """vmap axes of slots with shared topology: index arrays (and Newton's layout, built
     from them) unbatched, the rest batched."""
     aux = None if isinstance(solver, Newton) else 0
     return Problem(
@@ -326,7 +327,7 @@ def _chunk_size(requested: int | None, n: int, solver: Solver, to: BatchSizes, d
     if requested is None:
         requested = 256
         if isinstance(solver, Newton):
-            # keep each chunk's dense matrices near 256 MB
+            # keep the slots' dense matrices near 256 MB in all
             per_member = (3 * to.vertices) ** 2 * 8
             requested = max(1, min(256, 2 ** int(np.log2(max(2**28 // per_member, 1)))))
     size = min(int(requested), _pow2(n))
@@ -359,11 +360,11 @@ def fold_batch(
       solver: ``"newton"`` (dense Cholesky per member; solved (padded) sizes up to
         ``BATCH_DENSE_MAX`` vertices), ``"lbfgs"``, ``"dynamics"``, or a solver object.
       tol, max_iter, dtype, max_time: as in :func:`~origami_jax.fold`; ``max_time`` applies
-        to each chunk.
-      chunk_size: problems per compiled solve (default 256, less for large Newton problems);
-        rounded to a multiple of the device count.
-      devices: the devices to split each chunk across (default all of JAX's default backend).
-      progress: show chunks done / total on stderr (default: once a batch has run 2 s).
+        to each problem, from the moment it enters a slot.
+      chunk_size: problems solved at once, the slots of a compiled solve (default 256, less
+        for large Newton problems); rounded to a multiple of the device count.
+      devices: the devices to split the slots across (default all of JAX's default backend).
+      progress: show problems done / total on stderr (default: once a batch has run 2 s).
       share_topology: vmap problems of one topology unpadded with shared index arrays
         (faster; compiled once per topology): ``None`` (default) for a topology with at
         least :data:`SHARED_TOPOLOGY_MIN` problems or one pattern given for several
@@ -371,9 +372,8 @@ def fold_batch(
 
     Returns:
       A list in input order. A problem's result equals folding it alone (to the rounding of a
-      different summation order). When interrupted (KeyboardInterrupt) between or during
-      chunks, the list holds the finished chunks' results and ``None`` for the rest, with a
-      warning.
+      different summation order). When interrupted (KeyboardInterrupt), the list holds
+      the results of the problems already done and ``None`` for the rest, with a warning.
     """
     one_pattern = isinstance(patterns, CreasePattern)
     if one_pattern:
@@ -401,6 +401,8 @@ def fold_batch(
             "float64 needs jax.config.update('jax_enable_x64', True) (or JAX_ENABLE_X64=1)"
         )
     tol = default_tol(dtype) if tol is None else float(tol)
+    if int(max_iter) < 0:
+        raise ValueError(f"max_iter must be >= 0, got {max_iter}")
     percents = _per_problem(percent, n, "percent")
     for k, pc in enumerate(percents):
         if not np.isfinite(pc):
@@ -434,29 +436,31 @@ def fold_batch(
     plan = []
     for (to, topology), group in groups.items():
         size = _chunk_size(chunk_size, len(group), solver_obj, to, devices)
-        shared = topology is not None
-        plan += [(to, group[i : i + size], size, shared) for i in range(0, len(group), size)]
+        plan.append((to, group, size, topology is not None))
 
     results: list[FoldResult | None] = [None] * n
     bar = None
     if progress is not False:
-        bar = ProgressBar(len(plan), delay=0.0 if progress else 2.0, unit="chunks")
+        bar = ProgressBar(n, delay=0.0 if progress else 2.0, unit="problems")
     t_start = time.perf_counter()
-    done = 0
+    solved = [0]
+
+    def finish(done: list[tuple[int, FoldResult]]) -> None:
+        for index, result in done:
+            results[index] = result
+        solved[0] += len(done)
+        if bar is not None:
+            rate = solved[0] / max(time.perf_counter() - t_start, 1e-9)
+            bar.update(solved[0], f"{rate:.0f}/s")
+
     try:
-        for to, chunk, size, shared in plan:
-            _run_chunk(
-                chunk, to, size, shared, solver_obj, dtype, devices, max_iter, max_time, results
+        for to, group, size, shared in plan:
+            _run_group(
+                group, to, size, shared, solver_obj, dtype, devices, max_iter, max_time, finish
             )
-            done += 1
-            if bar is not None:
-                elapsed = time.perf_counter() - t_start
-                solved = sum(len(p[1]) for p in plan[:done])
-                bar.update(done, f"{solved} problems, {solved / max(elapsed, 1e-9):.0f}/s")
     except KeyboardInterrupt:
         warnings.warn(
-            f"fold_batch() interrupted after {done} of {len(plan)} chunks: "
-            f"{sum(r is not None for r in results)} of {n} problems have results, the rest "
+            f"fold_batch() interrupted: {solved[0]} of {n} problems have results, the rest "
             "are None",
             RuntimeWarning,
             stacklevel=2,
@@ -471,53 +475,88 @@ def _stack(*trees):
     return jax.tree.map(lambda *a: np.stack(a), *trees)
 
 
-def _run_chunk(
-    chunk, to, size, shared, solver, dtype, devices, max_iter, max_time, results
-) -> None:
-    """Pad (or with ``shared`` topology, not), stack and solve one chunk; write its members'
-    results into ``results``."""
-    filled = chunk + [chunk[0]] * (size - len(chunk))
-    axes = _problem_axes(solver) if shared else 0
-    if shared:
-        first = chunk[0]
-        layout = (
-            _padded_aux(solver, first, first.problem, to) if isinstance(solver, Newton) else None
-        )
-        problems = [_shared(m, solver, layout) for m in filled]
-        # leaves the chunk shares (axis None) are taken once, the rest stacked
-        stacked = jax.tree.map(
-            lambda a, *rest: rest[0] if a is None else _stack(*rest),
-            axes,
-            *problems,
-            is_leaf=lambda a: a is None,
-        )
-    else:
-        stacked = _stack(*[_padded(m, to, solver) for m in filled])
+def _host_problem(problems: list[Problem], axes, dtype) -> Problem:
+    """The slots' problems stacked along the batch axis (leaves of axis None taken once),
+    floats in ``dtype``: NumPy arrays whose rows :func:`_set_row` replaces."""
+    stacked = jax.tree.map(
+        lambda a, *rest: rest[0] if a is None else _stack(*rest),
+        axes,
+        *problems,
+        is_leaf=lambda a: a is None,
+    )
     floats = (stacked.params, stacked.start, stacked.projectors, stacked.tol, stacked.max_step)
-    floats = jax.tree.map(lambda a: np.asarray(a, dtype), floats)
-    problem = replace(
+    floats = jax.tree.map(lambda a: np.array(a, dtype), floats)
+    aux = stacked.aux
+    return replace(
         stacked,
         params=floats[0],
         start=floats[1],
         projectors=floats[2],
         tol=floats[3],
         max_step=floats[4],
-        aux=stacked.aux if not isinstance(stacked.aux, np.ndarray) else stacked.aux.astype(dtype),
+        aux=aux.astype(dtype) if isinstance(aux, np.ndarray) and aux.dtype.kind == "f" else aux,
     )
-    if len(devices) > 1:
-        mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
-        split = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
-        copied = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
-        # batched leaves split across the devices, shared ones (axis None) copied to each
-        shardings = jax.tree.map(
-            lambda a, leaf: jax.tree.map(lambda _: copied if a is None else split, leaf),
-            axes,
-            problem,
-            is_leaf=lambda a: a is None,
-        )
-        problem = jax.device_put(problem, shardings)
-    else:
-        problem = jax.device_put(problem, devices[0])
+
+
+def _set_row(host: Problem, axes, row: int, problem: Problem) -> None:
+    """Put ``problem`` into slot ``row`` of the stacked ``host`` problem (batched leaves)."""
+
+    def put(a, stacked, value):
+        if a is not None:
+            jax.tree.map(lambda s, v: s.__setitem__(row, v), stacked, value)
+
+    jax.tree.map(put, axes, host, problem, is_leaf=lambda a: a is None)
+
+
+def _to_devices(tree, axes, devices):
+    """``tree`` on ``devices``: batched leaves (axis 0) split across them, shared ones (axis
+    None) copied to each."""
+    if len(devices) == 1:
+        return jax.device_put(tree, devices[0])
+    mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
+    split = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
+    copied = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+    shardings = jax.tree.map(
+        lambda a, leaf: jax.tree.map(lambda _: copied if a is None else split, leaf),
+        axes,
+        tree,
+        is_leaf=lambda a: a is None,
+    )
+    return jax.device_put(tree, shardings)
+
+
+def _take_rows(rows: list[int], new, old):
+    """``old`` (host arrays with a batch axis) with ``rows`` taken from ``new``."""
+    take = np.zeros(len(jax.tree.leaves(old)[0]), bool)
+    take[rows] = True
+    return jax.tree.map(
+        lambda a, b: np.where(take.reshape(-1, *[1] * (a.ndim - 1)), a, b), new, old
+    )
+
+
+def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_time, finish):
+    """Solve problems of one compiled shape in ``size`` slots (padded to ``to``, or with
+    ``shared`` topology unpadded): each call runs every slot for a number of iterations; the
+    members that have stopped are handed to ``finish([(index, result), ...])`` and their slots
+    take the next problems of the queue, so no member waits for the slowest of a fixed chunk.
+
+    Slots left without a problem (the queue is empty) keep their last one, stopped: a member
+    out of ``max_time`` is marked TIME_LIMIT in the state so its lane stops too.
+    """
+    queue = deque(group)
+    first = group[0]
+    axes = _problem_axes(solver) if shared else 0
+    layout = None
+    if shared and isinstance(solver, Newton):
+        layout = _padded_aux(solver, first, first.problem, to)
+
+    def prepared(member: _Member) -> Problem:
+        return _shared(member, solver, layout) if shared else _padded(member, to, solver)
+
+    slots: list[_Member | None] = [queue.popleft() for _ in range(min(size, len(queue)))]
+    slots += [None] * (size - len(slots))
+    host = _host_problem([prepared(m or first) for m in slots], axes, dtype)
+    problem = _to_devices(host, axes, devices)
     (init, advance), compile_time = compiled(
         solver,
         problem,
@@ -529,19 +568,88 @@ def _run_chunk(
     if compile_time > 0:
         _COMPILES[0] += 1
     t0 = time.perf_counter()
-    state, m, x, angles, samples, out_of_time = drive(
-        solver, init, advance, problem, max_iter, max_time, None
-    )
-    state, m, x, angles = jax.device_get((state, m, x, angles))
-    wall_time = time.perf_counter() - t0
-    for b, member in enumerate(chunk):
-        results[member.index] = _result(
-            member, b, to, state, m, x, angles, samples, out_of_time, solver, dtype,
-            wall_time, compile_time,
-        )  # fmt: skip
+    state = init(problem)
+    check_start(solver, state)
+    state, m, x, angles = advance(state, problem, jnp.int32(0))
+    # (sample, entry): a refill's sample (entry: the slots refilled) counts only for those
+    samples = [(_sample(state, m, 0.0), None)]
+    entered = np.zeros(size)  # when each slot's problem entered, seconds after t0
+    since = np.zeros(size, np.int64)  # index of its first sample
+    # refill once this many slots are free (each refill costs an init and a metrics pass)
+    batch_refill = max(1, size // 16)
+    free: list[int] = []
+    chunk = 1
+    while True:
+        now = time.perf_counter() - t0
+        status = np.asarray(state.status)
+        iteration = samples[-1][0]["iteration"]
+        stopped = [
+            b
+            for b, member in enumerate(slots)
+            if member is not None
+            and (
+                status[b] != Status.RUNNING
+                or iteration[b] >= max_iter
+                or (max_time is not None and now - entered[b] >= max_time)
+            )
+        ]
+        if stopped:
+            host_out = jax.device_get((state, m, x, angles))
+            done = []
+            for b in stopped:
+                out_of_time = status[b] == Status.RUNNING and iteration[b] < max_iter
+                history = [s for s, entry in samples[since[b] :] if entry is None or entry[b]]
+                result = _result(
+                    slots[b], b, to, *host_out, history, entered[b], out_of_time, solver,
+                    dtype, now - entered[b], compile_time,
+                )  # fmt: skip
+                done.append((slots[b].index, result))
+                slots[b] = None
+            finish(done)
+            free += stopped
+            timed = [b for b in stopped if status[b] == Status.RUNNING]
+            if timed:  # stop their lanes: a running lane keeps the vmapped loop going
+                flags = np.array(host_out[0].status)
+                flags[timed] = Status.TIME_LIMIT
+                state = _to_devices(host_out[0]._replace(status=flags), 0, devices)
+        running = [b for b, member in enumerate(slots) if member is not None]
+        if queue and free and (len(free) >= batch_refill or not running):
+            refill = free[: len(queue)]
+            free = free[len(refill) :]
+            for b in refill:
+                slots[b] = queue.popleft()
+                _set_row(host, axes, b, prepared(slots[b]))
+            problem = _to_devices(host, axes, devices)
+            fresh = init(problem)
+            check_start(solver, fresh)
+            merged = _take_rows(refill, *jax.device_get((fresh, state)))
+            state, m, x, angles = advance(_to_devices(merged, 0, devices), problem, jnp.int32(0))
+            entry = np.zeros(size, bool)
+            entry[refill] = True
+            samples.append((_sample(state, m, time.perf_counter() - t0), entry))
+            entered[refill] = samples[-1][0]["wall_time"]
+            since[refill] = len(samples) - 1
+            continue  # a refilled problem may stop at its start (max_iter 0, say)
+        if not running:
+            break
+        # only the running members' samples are still needed
+        keep = int(np.min(since[running]))
+        samples, since = samples[keep:], since - keep
+        iteration = samples[-1][0]["iteration"]
+        steps = max(1, min(chunk, max_iter - int(np.max(iteration[running]))))
+        t_chunk = time.perf_counter()
+        # dispatch returns before the chunk has run: wait for it (see fold.drive)
+        state, m, x, angles = jax.block_until_ready(advance(state, problem, jnp.int32(steps)))
+        t_done = time.perf_counter()
+        samples.append((_sample(state, m, t_done - t0), None))
+        per_step = (t_done - t_chunk) / steps
+        chunk = max(1, min(64 * chunk, int(0.1 / max(per_step, 1e-9))))
 
 
-def _result(member, b, to, state, m, x, angles, samples, out_of_time, solver, dtype, wall, comp):
+def _result(
+    member, b, to, state, m, x, angles, samples, entered, out_of_time, solver, dtype, wall, comp
+):
+    """Slot ``b``'s result, unpadded; ``samples`` from its first (taken when it ``entered``)."""
     s = member.sizes
     status = Status(int(state.status[b]))
     if status == Status.RUNNING:
@@ -552,6 +660,8 @@ def _result(member, b, to, state, m, x, angles, samples, out_of_time, solver, dt
     metrics["fold_angle_error_mean"] *= to.creases / s.creases if s.creases else 0.0
     iterations = int(state.iteration[b])
     tol = float(member.problem.tol)
+    history = history_of(samples, b)
+    history["wall_time"] = history["wall_time"] - entered
     return FoldResult(
         pattern=member.pattern,
         positions=np.asarray(x[b, : s.vertices], np.float64),
@@ -565,6 +675,6 @@ def _result(member, b, to, state, m, x, angles, samples, out_of_time, solver, dt
         dtype=dtype.name,
         wall_time=wall,
         compile_time=comp,
-        history=history_of(samples, b),
+        history=history,
         **metrics,
     )

@@ -15,13 +15,14 @@ from origami_jax import PatternError, fold, patterns
 from origami_jax import batch as batch_module
 from origami_jax.batch import BatchSizes, bucket, compile_count, fold_batch, problem_sizes
 from origami_jax.energy import energy
+from origami_jax.fold import drive
 from origami_jax.geometry import bar_lengths, fold_angles
-from origami_jax.solvers import Newton
+from origami_jax.solvers import Newton, Status
 from origami_jax.solvers.base import positions
 
 jax.config.update("jax_enable_x64", True)
 
-# two buckets: three Miura-ori 2 x 2 (one compile, two chunks of two), and the seed's scene
+# two buckets: three Miura-ori 2 x 2 (one compile; in two slots, one refill), and the seed's scene
 MIURAS = [patterns.miura_ori(2, 2, fold_angle=a) for a in (0.6, 1.2, 2.0)]
 SEED = patterns.seed_waterbomb()
 
@@ -67,7 +68,8 @@ VARIANTS = [
 
 
 def test_shared_topology_equals_single_folds():
-    results = fold_batch(VARIANTS, share_topology=True, progress=False)
+    # two slots for three: the third enters a refilled slot (shared index arrays kept)
+    results = fold_batch(VARIANTS, share_topology=True, chunk_size=2, progress=False)
     for cp, r in zip(VARIANTS, results, strict=True):
         single = fold(cp)
         assert r.pattern is cp and r.converged and single.converged
@@ -82,8 +84,8 @@ def test_which_problems_share_their_topology(monkeypatch):
     plans = []
     monkeypatch.setattr(
         batch_module,
-        "_run_chunk",
-        lambda chunk, to, size, shared, *a: plans.append((len(chunk), shared)),
+        "_run_group",
+        lambda group, to, size, shared, *a: plans.append((len(group), shared)),
     )
     monkeypatch.setattr(batch_module, "SHARED_TOPOLOGY_MIN", 3)
     # three of one topology reach the minimum, the seed's scene alone does not
@@ -156,7 +158,7 @@ def test_padded_solve_equals_unpadded_bucket():
         (init, advance), _ = batch_module.compiled(
             solver, problem, num_edges, wrap=batch_module._wrap(jax.devices()[:1]), key="test"
         )
-        state, m, x, _, _, _ = batch_module.drive(solver, init, advance, problem, 200, None, None)
+        state, m, x, _, _, _ = drive(solver, init, advance, problem, 200, None, None)
         out.append((np.asarray(x[0, : member.sizes.vertices]), float(m["energy"][0])))
     assert np.max(np.abs(out[0][0] - out[1][0])) <= 1e-10 * cp.diameter
     assert out[0][1] == pytest.approx(out[1][1], rel=1e-8, abs=1e-15)
@@ -188,21 +190,41 @@ def test_stream_compiles_once_per_bucket():
     assert compile_count() - before <= 1  # all three share a bucket (maybe compiled already)
 
 
-def test_interrupt_keeps_finished_chunks(monkeypatch):
-    calls = []
-    real = batch_module._run_chunk
+def test_interrupt_keeps_finished_problems(monkeypatch):
+    # one slot: the three Miura-ori run one after another; Ctrl-C as the second one enters
+    def interrupted(*args):
+        raise KeyboardInterrupt
 
-    def flaky(chunk, *args):
-        calls.append(len(chunk))
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return real(chunk, *args)
-
-    monkeypatch.setattr(batch_module, "_run_chunk", flaky)
-    with pytest.warns(RuntimeWarning, match="interrupted after 1 of 2 chunks"):
-        results = fold_batch(MIURAS, chunk_size=2, progress=False)
-    assert [r is not None for r in results] == [True, True, False]
+    monkeypatch.setattr(batch_module, "_take_rows", interrupted)
+    with pytest.warns(RuntimeWarning, match="interrupted: 1 of 3 problems have results"):
+        results = fold_batch(MIURAS, chunk_size=1, devices=jax.devices()[:1], progress=False)
+    assert [r is not None for r in results] == [True, False, False]
     assert results[0].converged
+
+
+def test_iteration_and_time_limits_in_refilled_slots():
+    one = dict(chunk_size=1, devices=jax.devices()[:1], progress=False)
+    for r, cp in zip(fold_batch(MIURAS, max_iter=3, **one), MIURAS, strict=True):
+        single = fold(cp, max_iter=3)
+        assert r.status == Status.MAX_ITER and r.iterations == 3 == single.iterations
+        assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
+    assert [r.iterations for r in fold_batch(MIURAS, max_iter=0, **one)] == [0, 0, 0]
+    timed = fold_batch(MIURAS, max_time=0.0, **one)
+    assert [(r.status, r.iterations) for r in timed] == [(Status.TIME_LIMIT, 0)] * 3
+    with pytest.raises(ValueError, match="max_iter"):
+        fold_batch(MIURAS, max_iter=-1)
+
+
+def test_finished_slots_take_the_next_problems():
+    # two slots for three problems of one bucket: the third enters a refilled slot, and
+    # every result equals a single fold (its history starting at its own entry)
+    results = fold_batch(MIURAS, chunk_size=2, progress=False)
+    for cp, r in zip(MIURAS, results, strict=True):
+        single = fold(cp)
+        assert r.converged and r.iterations == single.iterations
+        assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
+        assert r.history["wall_time"][0] == 0.0 and r.history["iteration"][0] == 0
+        assert r.history["iteration"][-1] == r.iterations
 
 
 def test_bad_input():
@@ -229,12 +251,15 @@ SHARDED = textwrap.dedent(
     from origami_jax.batch import fold_batch
     assert len(jax.devices()) == 2, jax.devices()
     cps = [patterns.miura_ori(2, 2, fold_angle=a) for a in (0.5, 0.9, 1.3)]
-    two = fold_batch(cps, progress=False)
-    one = fold_batch(cps, devices=jax.devices()[:1], progress=False)
+    # two slots (one per device) for three problems: the third enters a refilled slot
+    two = fold_batch(cps, chunk_size=2, progress=False)
+    one = fold_batch(cps, chunk_size=2, devices=jax.devices()[:1], progress=False)
     # one pattern, several parameter sets: shared index arrays, replicated on both devices
     percents = [0.4, 0.7, 1.0]
-    two += fold_batch(cps[0], percent=percents, progress=False)
-    one += fold_batch(cps[0], percent=percents, devices=jax.devices()[:1], progress=False)
+    two += fold_batch(cps[0], percent=percents, chunk_size=2, progress=False)
+    one += fold_batch(
+        cps[0], percent=percents, chunk_size=2, devices=jax.devices()[:1], progress=False
+    )
     for a, b in zip(two, one):
         assert a.converged and b.converged
         assert np.max(np.abs(a.positions - b.positions)) <= 1e-12, (a, b)
