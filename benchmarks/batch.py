@@ -10,10 +10,10 @@ rad); each set is of one topology, so fold_batch vmaps it unpadded with shared i
 (its default); Newton folds each set once more padded to its size bucket
 (``share_topology=False``, as a set of mixed patterns would be). Each solver folds the whole
 set with one ``fold_batch`` call (after a first call on 256 of them that compiles the 256
-slots; compile time reported apart) and a sample of 64 of them one by one with ``fold`` (compiled beforehand); the ratio is
-folds per second of the batch over those of the loop, measured in the same run. The stream:
-100 patterns of random kinds and sizes, each folded by its own ``fold_batch`` call, as they
-would arrive one at a time; we count the compilations.
+slots; compile time reported apart) and a sample of 64 of them one by one with ``fold``
+(compiled beforehand); the ratio is folds per second of the batch over those of the loop,
+measured in the same run. The stream: 100 patterns of random kinds and sizes, each folded by
+its own ``fold_batch`` call, as they would arrive one at a time; we count the compilations.
 Writes ``batch_summary.csv``, ``batch_results.md`` and ``batch_throughput.png``.
 """
 

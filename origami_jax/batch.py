@@ -557,7 +557,7 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
     slots += [None] * (size - len(slots))
     host = _host_problem([prepared(m or first) for m in slots], axes, dtype)
     problem = _to_devices(host, axes, devices)
-    (init, advance), compile_time = compiled(
+    (start, advance), compile_time = compiled(
         solver,
         problem,
         to.bars,
@@ -568,21 +568,19 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
     if compile_time > 0:
         _COMPILES[0] += 1
     t0 = time.perf_counter()
-    state = init(problem)
+    state, m, x, angles = start(problem)
     check_start(solver, state)
-    state, m, x, angles = advance(state, problem, jnp.int32(0))
     # (sample, entry): a refill's sample (entry: the slots refilled) counts only for those
     samples = [(_sample(state, m, 0.0), None)]
     entered = np.zeros(size)  # when each slot's problem entered, seconds after t0
     since = np.zeros(size, np.int64)  # index of its first sample
-    # refill once this many slots are free (each refill costs an init and a metrics pass)
+    # refill once this many slots are free (each refill costs a start of every slot)
     batch_refill = max(1, size // 16)
     free: list[int] = []
     chunk = 1
     while True:
         now = time.perf_counter() - t0
-        status = np.asarray(state.status)
-        iteration = samples[-1][0]["iteration"]
+        status, iteration = samples[-1][0]["status"], samples[-1][0]["iteration"]
         stopped = [
             b
             for b, member in enumerate(slots)
@@ -620,10 +618,11 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
                 slots[b] = queue.popleft()
                 _set_row(host, axes, b, prepared(slots[b]))
             problem = _to_devices(host, axes, devices)
-            fresh = init(problem)
-            check_start(solver, fresh)
-            merged = _take_rows(refill, *jax.device_get((fresh, state)))
-            state, m, x, angles = advance(_to_devices(merged, 0, devices), problem, jnp.int32(0))
+            fresh = start(problem)
+            check_start(solver, fresh[0])
+            old = (state, m, x, angles)
+            state, m, x, angles = _take_rows(refill, *jax.device_get((fresh, old)))
+            state = _to_devices(state, 0, devices)
             entry = np.zeros(size, bool)
             entry[refill] = True
             samples.append((_sample(state, m, time.perf_counter() - t0), entry))
@@ -639,7 +638,7 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
         steps = max(1, min(chunk, max_iter - int(np.max(iteration[running]))))
         t_chunk = time.perf_counter()
         # dispatch returns before the chunk has run: wait for it (see fold.drive)
-        state, m, x, angles = jax.block_until_ready(advance(state, problem, jnp.int32(steps)))
+        state, m, x, angles = jax.block_until_ready(advance(state, problem, np.int32(steps)))
         t_done = time.perf_counter()
         samples.append((_sample(state, m, t_done - t0), None))
         per_step = (t_done - t_chunk) / steps

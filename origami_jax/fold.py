@@ -147,43 +147,55 @@ def _signature(tree) -> tuple:
     return treedef, tuple((np.shape(x), jnp.result_type(x).name) for x in leaves)
 
 
-def advance_fn(solver: Solver, num_edges: int):
-    """``advance(state, problem, steps)``: up to ``steps`` iterations; then the state, the metrics,
-    positions and per-edge fold angles (pure; :func:`fold` jits it, ``fold_batch`` vmaps it)."""
+def solve_fns(solver: Solver, num_edges: int):
+    """``(start, advance)``: ``start(problem)`` the solver's start state,
+    ``advance(state, problem, steps)`` up to ``steps`` iterations more; each returns the state,
+    the metrics, positions and per-edge fold angles (pure; :func:`fold` jits them,
+    ``fold_batch`` vmaps them)."""
 
-    def advance(state, problem, steps):
-        state = solver.run(state, problem, steps)
+    def measured(state, problem):
         x = positions(problem, state.u)
         m = position_metrics(x, problem.structure, problem.params, state.reference)
         m["grad_norm_rel"] = state.grad_max / jnp.where(state.grad_max0 > 0, state.grad_max0, 1)
         angles = edge_fold_angles(x, problem.structure, state.reference, num_edges)
         return state, m, x, angles
 
-    return advance
+    def start(problem):
+        return measured(solver.init(problem), problem)
+
+    def advance(state, problem, steps):
+        return measured(solver.run(state, problem, steps), problem)
+
+    return start, advance
 
 
 def compiled(solver: Solver, problem, num_edges: int, wrap=None, key=(), problem_axes=0):
-    """``(init, advance)`` compiled for this solver and these shapes (cached), and the compile
-    time (0 when cached). ``wrap(fn, in_axes)`` transforms both before ``jit`` (``fold_batch``:
-    vmap and sharding, with ``problem_axes`` the problem's, a prefix pytree of 0 and None;
-    ``key`` tells its variants apart)."""
+    """``(start, advance)`` of :func:`solve_fns` compiled for this solver and these shapes
+    (cached), and the compile time (0 when cached). ``wrap(fn, in_axes)`` transforms both
+    before ``jit`` (``fold_batch``: vmap and sharding, with ``problem_axes`` the problem's, a
+    prefix pytree of 0 and None; ``key`` tells its variants apart)."""
     cache_key = (solver, _signature(problem), num_edges, key)
     if cache_key in _CACHE:
         return _CACHE[cache_key], 0.0
-    init, advance = solver.init, advance_fn(solver, num_edges)
+    start, advance = solve_fns(solver, num_edges)
     if wrap is not None:
-        init, advance = wrap(init, (problem_axes,)), wrap(advance, (0, problem_axes, None))
+        start, advance = wrap(start, (problem_axes,)), wrap(advance, (0, problem_axes, None))
     t0 = time.perf_counter()
-    init_c = jax.jit(init).lower(problem).compile()
-    state_shape = jax.eval_shape(init, problem)
+    start_c = jax.jit(start).lower(problem).compile()
+    state_shape = jax.eval_shape(start, problem)[0]
     steps = jax.ShapeDtypeStruct((), jnp.int32)
     advance_c = jax.jit(advance).lower(state_shape, problem, steps).compile()
     compile_time = time.perf_counter() - t0
-    _CACHE[cache_key] = (init_c, advance_c)
+    _CACHE[cache_key] = (start_c, advance_c)
     return _CACHE[cache_key], compile_time
 
 
-def drive(solver, init, advance, problem, max_iter: int, max_time, record_every, on_chunk=None):
+# the first chunk's iterations are guessed to cost this many times the start (one gradient and
+# the metrics; a Newton iteration on a sparse sheet costs 15 to 100 times that), then measured
+FIRST_ITERATION_COST = 20.0
+
+
+def drive(solver, start, advance, problem, max_iter: int, max_time, record_every, on_chunk=None):
     """The host loop of a solve: compiled chunks of iterations until no problem is RUNNING, the
     iteration limit or ``max_time``. Chunks grow (up to 64x at a time) to about a tenth of a second
     (or stay at ``record_every``); a sample of the metrics is kept after each. Works for one
@@ -192,13 +204,14 @@ def drive(solver, init, advance, problem, max_iter: int, max_time, record_every,
     Returns ``(state, metrics, positions, angles, samples, out_of_time)``.
     """
     t0 = time.perf_counter()
-    state = init(problem)
+    state, m, x, angles = jax.block_until_ready(start(problem))
     check_start(solver, state)
-    state, m, x, angles = advance(state, problem, jnp.int32(0))
     samples = [_sample(state, m, 0.0)]
-    chunk, iterations = record_every or 1, 0
+    # a small problem's whole solve fits one chunk: a round trip costs it more than iterations
+    guess = FIRST_ITERATION_COST * (time.perf_counter() - t0)
+    chunk, iterations = record_every or max(1, int(0.1 / max(guess, 1e-9))), 0
     out_of_time = False
-    while np.any(np.asarray(state.status) == Status.RUNNING) and iterations < max_iter:
+    while np.any(samples[-1]["status"] == Status.RUNNING) and iterations < max_iter:
         if max_time is not None and time.perf_counter() - t0 >= max_time:
             out_of_time = True
             break
@@ -206,7 +219,7 @@ def drive(solver, init, advance, problem, max_iter: int, max_time, record_every,
         t_chunk = time.perf_counter()
         # dispatch returns before the chunk has run: wait for it, or the clock (and the chunk
         # sizes and history times taken from it) would read the dispatch, not the solve
-        state, m, x, angles = jax.block_until_ready(advance(state, problem, jnp.int32(steps)))
+        state, m, x, angles = jax.block_until_ready(advance(state, problem, np.int32(steps)))
         now = time.perf_counter()
         samples.append(_sample(state, m, now - t0))
         iterations = int(np.max(samples[-1]["iteration"]))
@@ -323,7 +336,7 @@ def fold(
     problem = make_problem(mesh, make_structure(mesh), params, start, tol)
     problem = prepare(solver_obj, problem, mesh)
 
-    (init, advance), compile_time = compiled(solver_obj, problem, mesh.num_edges)
+    (start, advance), compile_time = compiled(solver_obj, problem, mesh.num_edges)
     t0 = time.perf_counter()
     bar = ProgressBar(max_iter) if progress else None
 
@@ -332,7 +345,7 @@ def fold(
             bar.update(iterations, f"err {float(sample['fold_angle_error_max']):.2e} rad")
 
     state, m, x, angles, samples, out_of_time = drive(
-        solver_obj, init, advance, problem, max_iter, max_time, record_every, on_chunk
+        solver_obj, start, advance, problem, max_iter, max_time, record_every, on_chunk
     )
     iterations = int(state.iteration)
     x, angles = jax.device_get((x, angles))
@@ -369,10 +382,12 @@ def fold(
 
 
 def _sample(state, m, t: float) -> dict:
-    """The metrics after a chunk as host arrays (scalars, or (B,) in a batch)."""
+    """The metrics after a chunk, with the iteration and status, as host arrays (scalars, or
+    (B,) in a batch): one transfer."""
     keys = ("fold_angle_error_max", "strain_max", "energy", "grad_norm_rel")
-    out = jax.device_get({k: m[k] for k in keys})
-    out["iteration"] = np.asarray(state.iteration)
+    out = jax.device_get(
+        {**{k: m[k] for k in keys}, "iteration": state.iteration, "status": state.status}
+    )
     out["wall_time"] = t
     return out
 

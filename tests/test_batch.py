@@ -155,10 +155,10 @@ def test_padded_solve_equals_unpadded_bucket():
     for problem, num_edges in ((small, bucket(member.sizes).bars), (big, len(big.structure.bars))):
         problem = jax.tree.map(lambda a: jnp.asarray(a)[None], problem)
         solver = Newton()
-        (init, advance), _ = batch_module.compiled(
+        (start, advance), _ = batch_module.compiled(
             solver, problem, num_edges, wrap=batch_module._wrap(jax.devices()[:1]), key="test"
         )
-        state, m, x, _, _, _ = drive(solver, init, advance, problem, 200, None, None)
+        state, m, x, _, _, _ = drive(solver, start, advance, problem, 200, None, None)
         out.append((np.asarray(x[0, : member.sizes.vertices]), float(m["energy"][0])))
     assert np.max(np.abs(out[0][0] - out[1][0])) <= 1e-10 * cp.diameter
     assert out[0][1] == pytest.approx(out[1][1], rel=1e-8, abs=1e-15)
