@@ -17,8 +17,8 @@ one :class:`~origami_jax.fold.FoldResult` per problem, in input order.
 Problems that share one **topology** (the same pattern folded with other parameters, or
 variants of one pattern with other geometry) are vmapped directly instead, unpadded, with one
 copy of their index arrays for all the slots: the batched gathers and scatters then move
-whole rows of the batch instead of one member's entries at a time (1.1 to 1.7 times the folds
-per second of the same sets padded, in ``benchmarks/batch.py``). That is the
+whole rows of the batch instead of one member's entries at a time (1.0 to 1.7 times the folds
+per second of the same sets padded, over the runs of ``benchmarks/batch.py``). That is the
 default for a topology with at least :data:`SHARED_TOPOLOGY_MIN` problems in one call (or one
 pattern given for many parameter sets); it compiles once per topology instead of per bucket
 (``share_topology`` chooses).

@@ -191,7 +191,7 @@ def compiled(solver: Solver, problem, num_edges: int, wrap=None, key=(), problem
 
 
 # the first chunk's iterations are guessed to cost this many times the start (one gradient and
-# the metrics; a Newton iteration on a sparse sheet costs 15 to 100 times that), then measured
+# the metrics), then measured: a guess too low makes only the first chunk longer than planned
 FIRST_ITERATION_COST = 20.0
 
 
