@@ -52,7 +52,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from origami_jax.energy import FoldParams, Stiffness, param_arrays, structure_arrays
-from origami_jax.fold import FoldResult, _reason, _sample, compiled, default_tol, history_of
+from origami_jax.fold import (
+    FoldResult,
+    _reason,
+    _sample,
+    compiled,
+    default_tol,
+    history_of,
+    next_chunk,
+)
 from origami_jax.metrics import METRIC_NAMES
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
@@ -641,8 +649,7 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
         state, m, x, angles = jax.block_until_ready(advance(state, problem, np.int32(steps)))
         t_done = time.perf_counter()
         samples.append((_sample(state, m, t_done - t0), None))
-        per_step = (t_done - t_chunk) / steps
-        chunk = max(1, min(64 * chunk, int(0.1 / max(per_step, 1e-9))))
+        chunk = next_chunk(chunk, t_done - t_chunk, steps)
 
 
 def _result(

@@ -190,6 +190,18 @@ def compiled(solver: Solver, problem, num_edges: int, wrap=None, key=(), problem
     return _CACHE[cache_key], compile_time
 
 
+CHUNK_SECONDS = 0.1  # how long a chunk of compiled iterations aims to run
+
+
+def next_chunk(chunk: int, seconds: float, steps: int) -> int:
+    """The next chunk's iteration count after ``steps`` took ``seconds``: about
+    :data:`CHUNK_SECONDS`, growing at most 64x at a time. A chunk's time overstates its steps'
+    (it includes the round trip), so chunks grow quickly: each host round trip costs a fast
+    solve more than its iterations."""
+    per_step = seconds / max(steps, 1)
+    return max(1, min(64 * chunk, int(CHUNK_SECONDS / max(per_step, 1e-9))))
+
+
 # the first chunk's iterations are guessed to cost this many times the start (one gradient and
 # the metrics), then measured: a guess too low makes only the first chunk longer than planned
 FIRST_ITERATION_COST = 20.0
@@ -209,7 +221,7 @@ def drive(solver, start, advance, problem, max_iter: int, max_time, record_every
     samples = [_sample(state, m, 0.0)]
     # a small problem's whole solve fits one chunk: a round trip costs it more than iterations
     guess = FIRST_ITERATION_COST * (time.perf_counter() - t0)
-    chunk, iterations = record_every or max(1, int(0.1 / max(guess, 1e-9))), 0
+    chunk, iterations = record_every or max(1, int(CHUNK_SECONDS / max(guess, 1e-9))), 0
     out_of_time = False
     while np.any(samples[-1]["status"] == Status.RUNNING) and iterations < max_iter:
         if max_time is not None and time.perf_counter() - t0 >= max_time:
@@ -225,10 +237,7 @@ def drive(solver, start, advance, problem, max_iter: int, max_time, record_every
         iterations = int(np.max(samples[-1]["iteration"]))
         if on_chunk is not None:
             on_chunk(iterations, samples[-1])
-        per_step = (now - t_chunk) / max(steps, 1)
-        # a chunk's time overstates its steps' (it includes the round trip): grow quickly,
-        # as each host round trip costs a fast solve more than its iterations
-        chunk = max(1, min(64 * chunk, int(0.1 / max(per_step, 1e-9))))
+        chunk = next_chunk(chunk, now - t_chunk, steps)
         if record_every is not None:
             chunk = record_every
     return state, m, x, angles, samples, out_of_time
