@@ -66,6 +66,7 @@ from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
 from origami_jax.solvers import Dynamics, Newton, Solver, Status, get_solver
 from origami_jax.solvers.base import Problem, check_start, default_max_step, rigid_gauge
+from origami_jax.solvers.blocksparse import block_plan
 from origami_jax.solvers.dynamics import lumped_mass
 from origami_jax.solvers.newton import layout_arrays
 
@@ -556,7 +557,13 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
     axes = _problem_axes(solver) if shared else 0
     layout = None
     if shared and isinstance(solver, Newton):
-        layout = _padded_aux(solver, first, first.problem, to)
+        # one topology: all slots factor their Newton systems at once (blocksparse)
+        st = first.problem.structure
+        elements = [np.asarray(st.bars)] + ([np.asarray(st.hinges)] if len(st.hinges) else [])
+        layout = replace(
+            _padded_aux(solver, first, first.problem, to),
+            plan=block_plan(elements, to.vertices),
+        )
 
     def prepared(member: _Member) -> Problem:
         return _shared(member, solver, layout) if shared else _padded(member, to, solver)
