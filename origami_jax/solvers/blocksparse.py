@@ -268,7 +268,7 @@ def solve(
     ``rhs`` (V, 3). Returns the solution (V, 3) and whether it is finite (the matrix was
     positive definite). Under ``vmap`` (with ``plan`` shared) all members factor at once.
     """
-    args = jax.tree.map(lambda a: a[None], (blocks, proj, scale, mu, rhs))
+    args = jax.tree.map(lambda a: jnp.asarray(a)[None], (blocks, proj, scale, mu, rhs))
     out, ok = _batched(plan, *args)
     return out[0], ok[0]
 

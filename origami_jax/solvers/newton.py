@@ -20,6 +20,8 @@ a stiffness-sized identity). The step is limited to ``max_step`` per vertex and 
 The linear system is solved dense (Cholesky, inside ``jit``; vmap-able) for small patterns and
 sparse for large ones: SuperLU from scipy (already a dependency of jax) on the matrix in a
 fill-reducing nested-dissection order of the flat pattern, called through ``jax.pure_callback``.
+A batch of one topology (``fold_batch``'s shared index arrays) solves all its members at once
+with the block-sparse Cholesky of :mod:`origami_jax.solvers.blocksparse` instead.
 
 Example:
   >>> from origami_jax import fold, patterns
