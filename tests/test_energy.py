@@ -16,6 +16,7 @@ from origami_jax.geometry import (
     atan2_dihedral,
     dihedral_angles,
     dihedral_gradients,
+    dihedral_hessians,
     fold_angles,
 )
 
@@ -158,7 +159,8 @@ def test_closed_form_dihedral_gradient_and_its_jacobian_match_autodiff():
     def derivatives(p):
         g, h = jax.vmap(jax.grad(one))(p), jax.vmap(jax.hessian(one))(p)
         got = dihedral_gradients(p), jax.vmap(jax.jacfwd(closed))(p)
-        return g, h, got, (jax.vmap(jax.grad(custom))(p), jax.vmap(jax.hessian(custom))(p))
+        custom_got = jax.vmap(jax.grad(custom))(p), jax.vmap(jax.hessian(custom))(p)
+        return g, h, got, custom_got, (got[0], dihedral_hessians(p))
 
     g, h, *got = derivatives(p)
     scale_g = jnp.max(jnp.abs(g), axis=(1, 2), keepdims=True)
@@ -230,3 +232,7 @@ def test_collapsed_wing_moves_along_the_other_wings_normal():
     assert np.isfinite(g).all() and np.linalg.norm(g[3]) > 0
     both = p.at[0, 3].set(jnp.array([0.0, 0.3, 0.0]))  # both wings collapsed: no direction
     assert np.allclose(np.asarray(dihedral_gradients(both)), 0.0)
+    # the closed-form Hessian stays finite, the collapsed wing's own rows zero
+    for q in (p, both):
+        assert np.isfinite(np.asarray(dihedral_hessians(q))).all()
+    assert np.allclose(np.asarray(dihedral_hessians(p)[0, 2]), 0.0)

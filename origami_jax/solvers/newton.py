@@ -1,8 +1,9 @@
 """Newton's method on the same energy, with the exact Hessian assembled from element Hessians.
 
 Each iteration assembles the Hessian of the energy from per-element blocks: bars (6 x 6, in
-closed form) and torsion hinges (12 x 12, ``jax.hessian`` of the atan2 dihedral, vmapped). Far
-from equilibrium the Hessian can be indefinite, so the method works with two matrices:
+closed form) and torsion hinges (12 x 12, from the closed-form gradient and Hessian of the
+atan2 dihedral: :func:`~origami_jax.geometry.dihedral_hessians`). Far from equilibrium the
+Hessian can be indefinite, so the method works with two matrices:
 
 * the **convex part** (always positive semi-definite): each bar's Hessian with its compressive
   (negative) transverse term dropped, and each hinge's Gauss-Newton term
@@ -49,6 +50,7 @@ from origami_jax.geometry import (
     bar_lengths,
     dihedral_angles,
     dihedral_gradients,
+    dihedral_hessians,
     fold_angles,
 )
 from origami_jax.pattern import Mesh
@@ -240,43 +242,17 @@ def layout_arrays(
     )
 
 
-def _hinge_angle_curvature(
-    p: Array, reference: Array, per_coordinate: bool = False
-) -> tuple[Array, Array]:
-    """Fold angle and its Hessian (H, 4, 3, 4, 3) for each hinge.
-
-    The Hessian is the forward derivative of the closed-form gradient (a tenth of the cost of
-    jacfwd(grad)). ``per_coordinate``: one jvp per coordinate over all hinges, that coordinate's
-    axis first (the Hessian is symmetric), instead of jacfwd: vmapped over a batch and then
-    assembled, jacfwd's code (its directions' axis last) ran 2 to 4x slower on XLA's CPU, while
-    unbatched the unrolled jvps compile and run slower than jacfwd.
-    """
-    if not per_coordinate:
-        hess = jax.vmap(jax.jacfwd(lambda q: dihedral_gradients(q[None])[0]))(p)
-        return dihedral_angles(p, reference), hess
-    directions = [
-        jax.jvp(dihedral_gradients, (p,), (jnp.zeros_like(p).at[:, a, i].set(1.0),))[1]
-        for a in range(4)
-        for i in range(3)
-    ]
-    hess = jnp.stack(directions, axis=1).reshape(p.shape[0], 4, 3, 4, 3)
-    return dihedral_angles(p, reference), hess
-
-
 def element_blocks(
     x: Array,
     structure: Structure,
     params,
     reference: Array,
     exact: Array | bool,
-    batched: bool = False,
 ) -> list[Array]:
     """The element Hessians: bars (E, 2, 3, 2, 3), then hinges (H, 4, 3, 4, 3) if any.
 
     ``exact`` selects the exact Hessian; otherwise its convex part (compressive bar term and
     the hinges' ``(rho - goal) hess(rho)`` term dropped), positive semi-definite.
-    ``batched``: the code that runs faster vmapped over a batch (see
-    :func:`_hinge_angle_curvature`).
     """
     dtype = x.dtype
     p = x[structure.bars]
@@ -301,7 +277,8 @@ def element_blocks(
         def with_curvature():
             # the angle's own Hessian is most of an iteration's work on small patterns: only
             # when asked (``lax.cond`` skips it unbatched; vmapped it is a select)
-            rho, h = _hinge_angle_curvature(q, reference, per_coordinate=batched)
+            rho = dihedral_angles(q, reference)
+            h = dihedral_hessians(q)
             return kl * (gg + (rho - goal)[:, None, None, None, None] * h)
 
         if isinstance(exact, bool):
@@ -514,7 +491,7 @@ class Newton:
         x = positions(problem, s.u)
         if layout.plan is not None:
             structure, params = problem.structure, problem.params
-            blocks = element_blocks(x, structure, params, s.reference, exact, batched=True)
+            blocks = element_blocks(x, structure, params, s.reference, exact)
             proj = _vertex_projectors(x.shape[0], problem.pinned, problem.projectors)
             step, ok = blocksparse.solve(
                 layout.plan, blocks, proj, _gauge_scale(problem), s.mu, -s.grad
