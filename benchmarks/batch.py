@@ -7,14 +7,15 @@ compile count of a stream of patterns of random sizes.
 Problems: 1,024 Miura-ori 4 x 4 with random sector angles (50 to 80 degrees) and fold angles
 (0.3 to 2.5 rad), and 1,024 waterbomb tessellations 2 x 2 with random fold angles (0.3 to 2.5
 rad); each set is of one topology, so fold_batch vmaps it unpadded with shared index arrays
-(its default); Newton folds each set once more padded to its size bucket
-(``share_topology=False``, as a set of mixed patterns would be). Each solver folds the whole
-set with one ``fold_batch`` call (after a first call on 256 of them that compiles the 256
-slots; compile time reported apart) and a sample of 64 of them one by one with ``fold``
-(compiled beforehand); the ratio is folds per second of the batch over those of the loop,
-measured in the same run. The stream: 100 patterns of random kinds and sizes, each folded by
-its own ``fold_batch`` call, as they would arrive one at a time; we count the compilations.
-Writes ``batch_summary.csv``, ``batch_results.md`` and ``batch_throughput.png``.
+(its default). The process makes one JAX CPU device per core (``jax_num_cpu_devices``), which
+fold_batch uses by default; Newton folds each set twice more: on one device, and padded to
+its size bucket (``share_topology=False``, as a set of mixed patterns would be). Each solver
+folds the whole set with one ``fold_batch`` call (after a first call on 256 of them that
+compiles the 256 slots; compile time reported apart) and a sample of 64 of them one by one
+with ``fold`` (compiled beforehand); the ratio is folds per second of the batch over those of
+the loop, measured in the same run. The stream: 100 patterns of random kinds and sizes, each
+folded by its own ``fold_batch`` call, as they would arrive one at a time; we count the
+compilations. Writes ``batch_summary.csv``, ``batch_results.md`` and ``batch_throughput.png``.
 """
 
 from __future__ import annotations
@@ -29,6 +30,9 @@ os.environ.setdefault("JAX_ENABLE_X64", "1")
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
+# one JAX device per core: fold_batch splits its slots across them and they run in parallel
+# (XLA runs one device's small batched kernels on about one core)
+jax.config.update("jax_num_cpu_devices", os.cpu_count() or 1)
 
 import numpy as np  # noqa: E402
 
@@ -66,10 +70,16 @@ def stream(n: int, seed: int = 1) -> list:
     return out
 
 
-def throughput(cps: list, solver: str, loop_sample: int, share_topology=None) -> dict:
+def throughput(cps: list, solver: str, loop_sample: int, share_topology=None, devices=None) -> dict:
     """``share_topology``: as in fold_batch (None: the default, shared index arrays for a set
-    of one topology; False: padded to the size buckets)."""
-    kw = {"solver": solver, "progress": False, "share_topology": share_topology}
+    of one topology; False: padded to the size buckets); ``devices``: fold_batch's (None: all,
+    one per core)."""
+    kw = {
+        "solver": solver,
+        "progress": False,
+        "share_topology": share_topology,
+        "devices": devices,
+    }
     t0 = time.perf_counter()
     # compiles the slots' shape: 256 slots (the default) for any set of 256 or more
     warm = fold_batch(cps[:256], **kw)
@@ -93,6 +103,7 @@ def throughput(cps: list, solver: str, loop_sample: int, share_topology=None) ->
         "solver": solver,
         "problems": len(cps),
         "layout": "shared topology" if shared else "size buckets",
+        "devices": len(devices or jax.devices()),
         "solved_vertices": sizes.vertices if shared else bucket(sizes).vertices,
         "converged": sum(r.converged for r in results),
         "mean_iterations": float(np.mean([r.iterations for r in results])),
@@ -111,13 +122,17 @@ def main(out: Path, quick: bool = False) -> list[dict]:
     n = 64 if quick else 1024
     rows = []
     for name, cps in problem_sets(n).items():
-        # the solvers with the default (one topology: shared index arrays), then Newton
-        # padded to its size bucket as before, for the ratio of the two in one run
-        for solver, share in [(s, None) for s in SOLVERS] + [("newton", False)]:
-            row = {"set": name, **throughput(cps, solver, 16 if quick else 64, share)}
+        # the solvers with the defaults (one topology: shared index arrays; all devices),
+        # then Newton on one device, and padded to its size bucket, for the ratios in one run
+        runs = [(s, None, None) for s in SOLVERS]
+        runs += [("newton", None, jax.devices()[:1]), ("newton", False, None)]
+        for solver, share, devices in runs:
+            sample = 16 if quick else 64
+            row = {"set": name, **throughput(cps, solver, sample, share, devices)}
             rows.append(row)
             print(
-                f"{name:14s} {solver:9s} batch {row['batch_folds_per_s']:8.1f} folds/s  loop "
+                f"{name:14s} {solver:9s} {row['devices']} dev batch "
+                f"{row['batch_folds_per_s']:8.1f} folds/s  loop "
                 f"{row['loop_folds_per_s']:7.1f} folds/s  x{row['speedup']:.1f}  "
                 f"{row['converged']}/{n} converged  compile {row['compile_time_s']:.1f} s",
                 flush=True,
@@ -191,17 +206,17 @@ def write(rows: list[dict], out: Path) -> None:
         f" {device.platform}: {device.device_kind}; float64. Batch: one fold_batch call (compile"
         " excluded); loop: fold() one by one on 64 of them (compiled beforehand).",
         "",
-        "| set | solver | problems | layout | vertices solved | converged | mean iterations |"
-        " compile (s) | batch (s) | batch folds/s | loop folds/s | batch / loop | max position"
-        " diff vs single (of diameter) |",
-        "|" + "---|" * 13,
+        "| set | solver | problems | layout | devices | vertices solved | converged |"
+        " mean iterations | compile (s) | batch (s) | batch folds/s | loop folds/s |"
+        " batch / loop | max position diff vs single (of diameter) |",
+        "|" + "---|" * 14,
     ]
     for r in rows:
         if "compiles" in r:
             continue
         lines.append(
             f"| {r['set']} | {r['solver']} | {r['problems']} | {r['layout']} | "
-            f"{r['solved_vertices']} | "
+            f"{r['devices']} | {r['solved_vertices']} | "
             f"{r['converged']} | {r['mean_iterations']:.0f} | {r['compile_time_s']:.1f} | "
             f"{r['batch_time_s']:.2f} | {r['batch_folds_per_s']:.0f} | "
             f"{r['loop_folds_per_s']:.0f} | {r['speedup']:.1f} | "
@@ -225,7 +240,9 @@ def write(rows: list[dict], out: Path) -> None:
     data = [r for r in rows if "compiles" not in r]
     fig, ax = plt.subplots(figsize=(6, 3.5))
     labels = [
-        f"{r['set']}\n{r['solver']}" + ("\n(buckets)" if r["layout"] == "size buckets" else "")
+        f"{r['set']}\n{r['solver']}"
+        + ("\n(buckets)" if r["layout"] == "size buckets" else "")
+        + ("\n(1 device)" if r["devices"] == 1 and len(jax.devices()) > 1 else "")
         for r in data
     ]
     pos = np.arange(len(data))

@@ -41,6 +41,8 @@ os.environ.setdefault("JAX_ENABLE_X64", "1")
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
+# one JAX device per core, as benchmarks/batch.py (fold() uses the first; fold_batch all)
+jax.config.update("jax_num_cpu_devices", os.cpu_count() or 1)
 
 import numpy as np  # noqa: E402
 

@@ -408,6 +408,24 @@ def _host_sparse_solve(indptr, indices, data, rhs):
     return x.astype(rhs.dtype), np.asarray(ok)
 
 
+@jax.custom_batching.custom_vmap
+def _dense_solve(matrix: Array, rhs: Array) -> Array:
+    """``matrix^-1 rhs`` by Cholesky (LAPACK), NaN where ``matrix`` is not positive definite."""
+    return jax.scipy.linalg.cho_solve((jnp.linalg.cholesky(matrix), True), rhs)
+
+
+@_dense_solve.def_vmap
+def _dense_solve_vmap(axis_size, in_batched, matrix, rhs):
+    # one LAPACK call per member, in a loop: jaxlib's batched Cholesky splits its batch over
+    # XLA's CPU thread pool and waits for it from inside the pool, which deadlocks when
+    # several CPU devices (fold_batch's shards) run at once
+    matrix, rhs = (
+        a if batched else jnp.broadcast_to(a, (axis_size, *a.shape))
+        for a, batched in zip((matrix, rhs), in_batched, strict=True)
+    )
+    return jax.lax.map(lambda pair: _dense_solve(*pair), (matrix, rhs)), True
+
+
 class NewtonState(NamedTuple):
     u: Array  # (V, 3) displacement from problem.start, before the gauge
     grad: Array  # (V, 3) gradient of the energy at u (gauged)
@@ -518,9 +536,7 @@ class Newton:
                 vmap_method="sequential",
             )
         else:
-            n = layout.size
-            chol = jnp.linalg.cholesky(values.reshape(n, n))
-            sol = jax.scipy.linalg.cho_solve((chol, True), rhs)
+            sol = _dense_solve(values.reshape(layout.size, layout.size), rhs)
             ok = jnp.all(jnp.isfinite(sol))
         step = sol[layout.order].reshape(s.u.shape)
         return jnp.where(ok, step, 0.0), ok
