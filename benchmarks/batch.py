@@ -230,6 +230,11 @@ def write(rows: list[dict], out: Path) -> None:
             ]
     (out / "batch_results.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    plot([r for r in rows if "compiles" not in r], out)
+
+
+def plot(data: list[dict], out: Path) -> None:
+    """``batch_throughput.png``: folds per second of the batch and of the loop, per row."""
     try:
         import matplotlib
 
@@ -237,18 +242,18 @@ def write(rows: list[dict], out: Path) -> None:
         import matplotlib.pyplot as plt
     except ImportError:
         return
-    data = [r for r in rows if "compiles" not in r]
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    fig, ax = plt.subplots(figsize=(9, 4))
     labels = [
-        f"{r['set']}\n{r['solver']}"
+        r["set"].replace("_", "\n", 1)
+        + f"\n{r['solver']}"
         + ("\n(buckets)" if r["layout"] == "size buckets" else "")
-        + ("\n(1 device)" if r["devices"] == 1 and len(jax.devices()) > 1 else "")
+        + ("\n(1 device)" if int(r["devices"]) == 1 and len(jax.devices()) > 1 else "")
         for r in data
     ]
     pos = np.arange(len(data))
-    ax.bar(pos - 0.2, [r["batch_folds_per_s"] for r in data], 0.4, label="fold_batch")
-    ax.bar(pos + 0.2, [r["loop_folds_per_s"] for r in data], 0.4, label="loop of fold()")
-    ax.set_xticks(pos, labels, fontsize=6)
+    ax.bar(pos - 0.2, [float(r["batch_folds_per_s"]) for r in data], 0.4, label="fold_batch")
+    ax.bar(pos + 0.2, [float(r["loop_folds_per_s"]) for r in data], 0.4, label="loop of fold()")
+    ax.set_xticks(pos, labels, fontsize=7)
     ax.set_yscale("log")
     ax.set_ylabel("folds per second")
     ax.legend(fontsize=7)
