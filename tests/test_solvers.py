@@ -230,3 +230,23 @@ def test_block_sparse_solve_matches_dense():
     step2, ok2 = each(plans, xs[:2], rhs[:2])
     assert np.all(np.asarray(ok2))
     np.testing.assert_allclose(step2, expected[:2], rtol=1e-8, atol=1e-10 * np.abs(expected).max())
+
+
+def test_dense_solve_batches_one_member_at_a_time_and_keeps_forward_derivatives():
+    from origami_jax.solvers.newton import _cholesky_solve, _dense_solve
+
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(3, 5, 5))
+    a = a @ a.transpose(0, 2, 1) + 5 * np.eye(5)
+    b = rng.normal(size=(3, 5))
+    np.testing.assert_allclose(jax.vmap(_dense_solve)(a, b), jax.vmap(_cholesky_solve)(a, b))
+    shared = jax.vmap(_dense_solve, in_axes=(None, 0))(a[0], b)
+    np.testing.assert_allclose(shared, jax.vmap(_cholesky_solve, in_axes=(None, 0))(a[0], b))
+
+    def total(solve):
+        return lambda s: jnp.sum(solve(a[0] * s, b[0]))
+
+    # forward mode batches only the tangents: the rule must not recurse
+    assert np.isclose(jax.jacfwd(total(_dense_solve))(1.0), jax.jacfwd(total(_cholesky_solve))(1.0))
+    bad = jax.vmap(_dense_solve)(a - 10 * np.eye(5), b)
+    assert np.all(np.isnan(np.asarray(bad)))

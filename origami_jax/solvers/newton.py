@@ -408,14 +408,22 @@ def _host_sparse_solve(indptr, indices, data, rhs):
     return x.astype(rhs.dtype), np.asarray(ok)
 
 
-@jax.custom_batching.custom_vmap
-def _dense_solve(matrix: Array, rhs: Array) -> Array:
+def _cholesky_solve(matrix: Array, rhs: Array) -> Array:
     """``matrix^-1 rhs`` by Cholesky (LAPACK), NaN where ``matrix`` is not positive definite."""
     return jax.scipy.linalg.cho_solve((jnp.linalg.cholesky(matrix), True), rhs)
 
 
+@jax.custom_batching.custom_vmap
+def _dense_solve(matrix: Array, rhs: Array) -> Array:
+    """:func:`_cholesky_solve`, one member at a time under ``vmap`` (forward-mode
+    differentiable; like Newton's ``while_loop``, not reverse-mode)."""
+    return _cholesky_solve(matrix, rhs)
+
+
 @_dense_solve.def_vmap
 def _dense_solve_vmap(axis_size, in_batched, matrix, rhs):
+    if not any(in_batched):  # only tangents batched (jacfwd): nothing to split
+        return _cholesky_solve(matrix, rhs), False
     # one LAPACK call per member, in a loop: jaxlib's batched Cholesky splits its batch over
     # XLA's CPU thread pool and waits for it from inside the pool, which deadlocks when
     # several CPU devices (fold_batch's shards) run at once
@@ -423,7 +431,7 @@ def _dense_solve_vmap(axis_size, in_batched, matrix, rhs):
         a if batched else jnp.broadcast_to(a, (axis_size, *a.shape))
         for a, batched in zip((matrix, rhs), in_batched, strict=True)
     )
-    return jax.lax.map(lambda pair: _dense_solve(*pair), (matrix, rhs)), True
+    return jax.lax.map(lambda pair: _cholesky_solve(*pair), (matrix, rhs)), True
 
 
 class NewtonState(NamedTuple):
