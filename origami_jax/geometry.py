@@ -7,6 +7,8 @@ its left and ``l`` of the one on its right (in the flat, counterclockwise patter
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 from jax import Array
@@ -115,25 +117,58 @@ def dihedral_gradients(p: Array) -> Array:
     Jacobian. A nearly collapsed wing gives large but finite values; one exactly on the axis
     (zero normal) moves along the other wing's normal.
     """
-    x0, x1, x2, x3 = p[:, 0], p[:, 1], p[:, 2], p[:, 3]
-    tiny = jnp.finfo(p.dtype).tiny
-    e = x1 - x0
-    e2 = jnp.maximum(jnp.sum(e * e, axis=-1), tiny)
-    n_left = _cross(e, x2 - x0)
-    n_right = _cross(x3 - x0, e)
-    length = jnp.sqrt(e2)[:, None]
-    nl2 = jnp.sum(n_left * n_left, axis=-1)[:, None]
-    nr2 = jnp.sum(n_right * n_right, axis=-1)[:, None]
-    g2 = length * n_left / jnp.maximum(nl2, tiny)
-    g3 = length * n_right / jnp.maximum(nr2, tiny)
+    return _gradients(_Hinge.of(p))
+
+
+class _Hinge(NamedTuple):
+    """What a hinge's derivatives share: axis ``e``, wing offsets ``a``, ``b`` (from corner 0),
+    ``|e|^2`` (floored at ``tiny``) and ``|e|``, the wings' normals and their squared norms, and
+    the wings' projections ``t = offset . e / |e|^2`` on the axis; (H,) or (H, 3) each."""
+
+    e: Array
+    a: Array
+    b: Array
+    e2: Array
+    length: Array
+    n_left: Array
+    n_right: Array
+    nl2: Array
+    nr2: Array
+    t2: Array
+    t3: Array
+
+    @staticmethod
+    def of(p: Array) -> _Hinge:
+        e, a, b = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]
+        e2 = jnp.maximum(jnp.sum(e * e, axis=-1), jnp.finfo(p.dtype).tiny)
+        n_left, n_right = _cross(e, a), _cross(b, e)
+        return _Hinge(
+            e=e,
+            a=a,
+            b=b,
+            e2=e2,
+            length=jnp.sqrt(e2),
+            n_left=n_left,
+            n_right=n_right,
+            nl2=jnp.sum(n_left * n_left, axis=-1),
+            nr2=jnp.sum(n_right * n_right, axis=-1),
+            t2=jnp.sum(a * e, axis=-1) / e2,
+            t3=jnp.sum(b * e, axis=-1) / e2,
+        )
+
+
+def _gradients(h: _Hinge) -> Array:
+    """:func:`dihedral_gradients` from the hinge's shared quantities."""
+    tiny = jnp.finfo(h.e.dtype).tiny
+    length, nl2, nr2 = h.length[:, None], h.nl2[:, None], h.nr2[:, None]
+    g2 = length * h.n_left / jnp.maximum(nl2, tiny)
+    g3 = length * h.n_right / jnp.maximum(nr2, tiny)
     # a wing collapsed onto the axis has no normal: move it along the other wing's normal, at
     # the rate of a wing as wide as the axis is long, so a collapsed start unfolds (0 would
     # leave it at a stationary point of the bars alone)
-    g2 = jnp.where(nl2 > 0, g2, n_right / jnp.maximum(jnp.sqrt(nr2) * length, tiny))
-    g3 = jnp.where(nr2 > 0, g3, n_left / jnp.maximum(jnp.sqrt(nl2) * length, tiny))
-    t2 = (jnp.sum((x2 - x0) * e, axis=-1) / e2)[:, None]
-    t3 = (jnp.sum((x3 - x0) * e, axis=-1) / e2)[:, None]
-    g1 = -(t2 * g2 + t3 * g3)
+    g2 = jnp.where(nl2 > 0, g2, h.n_right / jnp.maximum(jnp.sqrt(nr2) * length, tiny))
+    g3 = jnp.where(nr2 > 0, g3, h.n_left / jnp.maximum(jnp.sqrt(nl2) * length, tiny))
+    g1 = -(h.t2[:, None] * g2 + h.t3[:, None] * g3)
     g0 = -(g1 + g2 + g3)
     return jnp.stack([g0, g1, g2, g3], axis=1)
 
@@ -163,17 +198,12 @@ def dihedral_hessians(p: Array) -> Array:
     compiles in a fraction of the time. A collapsed wing (zero normal), whose gradient is a
     fallback, contributes no curvature.
     """
-    x0, x1, x2, x3 = p[:, 0], p[:, 1], p[:, 2], p[:, 3]
+    h = _Hinge.of(p)
+    e, a, b, e2, length = h.e, h.a, h.b, h.e2, h.length
+    nl2, nr2, t2, t3 = h.nl2, h.nr2, h.t2, h.t3
+    x1, x2, x3 = p[:, 1], p[:, 2], p[:, 3]
     tiny = jnp.finfo(p.dtype).tiny
-    e, a, b = x1 - x0, x2 - x0, x3 - x0
-    e2 = jnp.maximum(jnp.sum(e * e, axis=-1), tiny)
-    length = jnp.sqrt(e2)
-    n_left, n_right = _cross(e, a), _cross(b, e)
-    nl2 = jnp.sum(n_left * n_left, axis=-1)
-    nr2 = jnp.sum(n_right * n_right, axis=-1)
-    g = dihedral_gradients(p)
-    t2 = jnp.sum(a * e, axis=-1) / e2
-    t3 = jnp.sum(b * e, axis=-1) / e2
+    g = _gradients(h)
     zero = jnp.zeros_like(e)
     unit = e / length[:, None]
     d_length = [-unit, unit, zero, zero]
@@ -187,8 +217,8 @@ def dihedral_hessians(p: Array) -> Array:
             out[k] = out[k] + length[:, None, None] / n2 * turn
         return out
 
-    left = wing(n_left, nl2, {0: x2 - x1, 1: -a, 2: e})
-    right = wing(n_right, nr2, {0: x1 - x3, 1: b, 3: -e})
+    left = wing(h.n_left, nl2, {0: x2 - x1, 1: -a, 2: e})
+    right = wing(h.n_right, nr2, {0: x1 - x3, 1: b, 3: -e})
     left = [jnp.where((nl2 > 0)[:, None, None], d, 0.0) for d in left]
     right = [jnp.where((nr2 > 0)[:, None, None], d, 0.0) for d in right]
     # d t / d x_k: t2 = a . e / |e|^2 moves with x2 (along e) and with x1 (a - 2 t2 e)

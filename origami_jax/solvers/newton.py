@@ -243,11 +243,7 @@ def layout_arrays(
 
 
 def element_blocks(
-    x: Array,
-    structure: Structure,
-    params,
-    reference: Array,
-    exact: Array | bool,
+    x: Array, structure: Structure, params, reference: Array, exact: Array | bool
 ) -> list[Array]:
     """The element Hessians: bars (E, 2, 3, 2, 3), then hinges (H, 4, 3, 4, 3) if any.
 
