@@ -48,7 +48,7 @@ import numpy as np  # noqa: E402
 
 from origami_jax import PatternError, fold, io, patterns  # noqa: E402
 from origami_jax.kinematics import rigid_fold  # noqa: E402
-from origami_jax.solvers import origami_simulator  # noqa: E402
+from origami_jax.solvers import hostsparse, origami_simulator  # noqa: E402
 
 THRESHOLDS = (1e-3, 1e-6, 1e-8, 1e-9)
 SOLVERS = ("newton", "lbfgs", "dynamics")
@@ -157,7 +157,8 @@ def main(argv=None) -> int:
     device = jax.devices()[0]
     machine = (
         f"{platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}, "
-        f"device {device.platform}: {device.device_kind}"
+        f"device {device.platform}: {device.device_kind}, "
+        f"sparse Newton solves: {hostsparse.backend()}"
     )
     only = None if args.solvers is None else set(args.solvers.split(","))
     for part, (make_cases, prefix, with_plots, max_time) in PARTS.items():

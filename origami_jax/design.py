@@ -52,7 +52,7 @@ from jax import Array
 
 from origami_jax.energy import FoldParams, make_params, make_structure
 from origami_jax.pattern import CreasePattern
-from origami_jax.solvers import Solver, Status, get_solver
+from origami_jax.solvers import Solver, Status, get_solver, hostsparse
 from origami_jax.solvers.base import (
     Problem,
     default_max_step,
@@ -64,7 +64,6 @@ from origami_jax.solvers.base import (
 from origami_jax.solvers.newton import (
     HessianLayout,
     Newton,
-    _host_sparse_solve,
     gauged_hessian,
 )
 
@@ -172,7 +171,7 @@ def _linear_solve(problem: Problem, factor: Array, rhs: Array) -> Array:
     b = jnp.zeros(layout.size, rhs.dtype).at[layout.order].set(rhs.reshape(-1))
     if layout.sparse:
         sol, _ = jax.pure_callback(
-            _host_sparse_solve,
+            hostsparse.solve,
             (jax.ShapeDtypeStruct(b.shape, b.dtype), jax.ShapeDtypeStruct((), jnp.bool_)),
             layout.indptr,
             layout.indices,

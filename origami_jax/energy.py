@@ -53,6 +53,7 @@ __all__ = [
     "make_params",
     "param_arrays",
     "energy",
+    "residuals",
     "build_energy",
     "initial_reference",
 ]
@@ -181,6 +182,24 @@ def hinge_goals(structure: Structure, params: FoldParams) -> tuple[Array, Array]
     return jnp.concatenate(goals), jnp.concatenate(stiffness)
 
 
+def residuals(
+    x: Array, structure: Structure, params: FoldParams, reference: Array | None = None
+) -> tuple[Array, Array]:
+    """The energy as weighted squares, ``energy = 1/2 sum(w r^2)``: (E + H,) residuals ``r``
+    (bar length minus rest length, then fold angle minus goal, radians) and their weights ``w``
+    (``axial / l0``, then ``stiffness * l0``). ``reference`` as in :func:`energy`."""
+    l0 = params.rest_length
+    r = [bar_lengths(x, structure.bars) - l0]
+    w = [jnp.broadcast_to(params.stiffness.axial / l0, l0.shape)]
+    if structure.hinges.shape[0]:
+        goal, stiffness = hinge_goals(structure, params)
+        if reference is None:
+            reference = 0.5 * goal
+        r.append(fold_angles(x, structure.hinges, reference) - goal)
+        w.append(stiffness * l0[structure.hinge_bars])
+    return jnp.concatenate(r), jnp.concatenate(w)
+
+
 def energy(
     x: Array, structure: Structure, params: FoldParams, reference: Array | None = None
 ) -> Array:
@@ -190,16 +209,8 @@ def energy(
     :func:`origami_jax.geometry.fold_angles`); it changes no gradient. ``None`` uses the half-way
     reference of :func:`initial_reference`, continuous on the whole way from flat to target.
     """
-    l0 = params.rest_length
-    l = bar_lengths(x, structure.bars)
-    total = 0.5 * jnp.sum(params.stiffness.axial / l0 * (l - l0) ** 2)
-    if structure.hinges.shape[0]:
-        goal, stiffness = hinge_goals(structure, params)
-        if reference is None:
-            reference = 0.5 * goal
-        rho = fold_angles(x, structure.hinges, reference)
-        total += 0.5 * jnp.sum(stiffness * l0[structure.hinge_bars] * (rho - goal) ** 2)
-    return total
+    r, w = residuals(x, structure, params, reference)
+    return 0.5 * jnp.sum(w * r * r)
 
 
 def initial_reference(x: Array, structure: Structure, params: FoldParams) -> Array:

@@ -134,7 +134,7 @@ def test_pre_folded_start_past_pi_is_brought_back():
     assert result.fold_angles[k] == pytest.approx(np.pi, abs=1e-8)
     assert len(result.through_pi) == 0
     # stopped early, the crease is still past pi, and the result says so
-    early = fold(cp, start=start, max_iter=1)
+    early = fold(cp, start=start, max_iter=0)
     assert list(early.through_pi) == [k] and "folded through pi" in early.summary()
 
 

@@ -116,9 +116,18 @@ def gradient_floor(problem: Problem) -> Array:
     return 2 * jnp.finfo(problem.start.dtype).eps * jnp.max(per_vertex)
 
 
-def has_converged(grad_max: Array, grad_max0: Array, problem: Problem) -> Array:
-    """``grad_norm_rel <= tol``, or the gradient is down to its rounding noise."""
-    return grad_max <= jnp.maximum(problem.tol * grad_max0, gradient_floor(problem))
+def has_converged(
+    grad_max: Array, grad_max0: Array, problem: Problem, previous: Array | None = None
+) -> Array:
+    """``grad_norm_rel <= tol``, or the gradient is down to its rounding noise (with
+    ``previous``, the last iterate's ``grad_max``: there too, for a method whose step still
+    gains there, as Newton's does: measured, one more Newton step from the floor took a stiff
+    Miura-ori from 4.4e-9 to 3.5e-11 rad, a float32 one from 1.1e-4 to 3.6e-7 rad)."""
+    floor = gradient_floor(problem)
+    at_floor = grad_max <= floor
+    if previous is not None:
+        at_floor = at_floor & (previous <= floor)
+    return (grad_max <= problem.tol * grad_max0) | at_floor
 
 
 def run_steps(step, state, steps: Array):

@@ -22,13 +22,14 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-__all__ = ["BlockPlan", "block_plan", "solve"]
+__all__ = ["BlockPlan", "Factor", "block_plan", "factor", "solve", "solve_factored"]
 
 
 @functools.partial(
@@ -195,13 +196,22 @@ def _upper_solve(f: tuple[Array, ...], y: Array) -> Array:
     return jnp.stack([x0, x1, x2])
 
 
-def _batched(
-    plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array, rhs: Array
-) -> tuple[Array, Array]:
-    """:func:`solve` over a leading batch axis of every argument but ``plan``."""
+class Factor(NamedTuple):
+    """A batch's block Cholesky factor, batch innermost: ``blocks`` (N + 2, 3, 3, B) the stored
+    blocks of L (with the two padding blocks), ``diag`` (V, 6, B) each step's 3 x 3 diagonal
+    factor (:func:`_chol3`)."""
+
+    blocks: Array
+    diag: Array
+
+
+def _factor_batched(
+    plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array
+) -> Factor:
+    """Factor ``H + mu diag H + floor`` over a leading batch axis of every argument but ``plan``."""
     # the element Hessians are computed once, not fused into (and recomputed by) the gathers
     blocks = jax.lax.optimization_barrier(blocks)
-    b, dtype = rhs.shape[0], rhs.dtype
+    b, dtype = proj.shape[0], proj.dtype
     num = plan.block_vertices.shape[0]
     eye = jnp.eye(3, dtype=dtype)[None, :, :, None]
     # (b, el, k, 3, k, 3) -> vertex blocks (b, el * k * k, 3, 3) -> stored blocks (N, 3, 3, b)
@@ -231,7 +241,12 @@ def _batched(
         return m.at[target].add(-update), jnp.stack(f)
 
     steps = (plan.diag, plan.column, plan.pair_a, plan.pair_b, plan.pair_target)
-    factor, diag_factors = jax.lax.scan(eliminate, matrix, steps)
+    return Factor(*jax.lax.scan(eliminate, matrix, steps))
+
+
+def _solve_batched(plan: BlockPlan, factor: Factor, rhs: Array) -> tuple[Array, Array]:
+    """``L^-T L^-1 rhs`` for ``rhs`` (B, V, 3); the solution and whether each member's is finite."""
+    b, dtype = rhs.shape[0], rhs.dtype
     y = jnp.moveaxis(rhs[:, plan.order], 0, -1)
     y = jnp.concatenate([y, jnp.zeros((1, 3, b), dtype)])  # spare row for the padding
     ks = jnp.arange(plan.order.shape[0])
@@ -240,51 +255,85 @@ def _batched(
         k, f, column, below = step
         yk = _lower_solve(tuple(f), y[k])
         y = y.at[k].set(yk)
-        return y.at[below].add(-jnp.sum(factor[column] * yk[None, None], axis=2)), None
+        return y.at[below].add(-jnp.sum(factor.blocks[column] * yk[None, None], axis=2)), None
 
     def backward(x, step):
         k, f, column, below = step
-        rest = jnp.sum(factor[column] * x[below][:, :, None], axis=(0, 1))
+        rest = jnp.sum(factor.blocks[column] * x[below][:, :, None], axis=(0, 1))
         return x.at[k].set(_upper_solve(tuple(f), x[k] - rest)), None
 
-    solve_steps = (ks, diag_factors, plan.column, plan.below)
+    solve_steps = (ks, factor.diag, plan.column, plan.below)
     y, _ = jax.lax.scan(forward, y, solve_steps)
     x, _ = jax.lax.scan(backward, y, solve_steps, reverse=True)
     out = jnp.moveaxis(x[plan.rank], -1, 0)
-    ok = jnp.all(jnp.isfinite(out), axis=(1, 2))
-    return out, ok
+    return out, jnp.all(jnp.isfinite(out), axis=(1, 2))
+
+
+def _batch_last(a: Array) -> Array:
+    return jnp.moveaxis(a, 0, -1)
+
+
+def _batch_first(a: Array) -> Array:
+    return jnp.moveaxis(a, -1, 0)
 
 
 @jax.custom_batching.custom_vmap
-def solve(
-    plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array, rhs: Array
-) -> tuple[Array, Array]:
-    """Solve ``(H + mu diag H + floor) d = rhs`` for the gauged Hessian ``H`` of one problem.
+def factor(plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array) -> Factor:
+    """Factor ``H + mu diag H + floor`` for the gauged Hessian ``H`` of one problem.
 
     ``blocks`` the element Hessians (bars (E, 2, 3, 2, 3), then hinges (H, 4, 3, 4, 3), as
     :func:`origami_jax.solvers.newton.element_blocks` gives them); ``proj`` (V, 3, 3) each
     vertex's gauge projector (identity but at pinned vertices); ``scale`` the stiffness put on
-    the pinned-out directions; ``mu`` the Levenberg-Marquardt shift relative to the diagonal;
-    ``rhs`` (V, 3). Returns the solution (V, 3) and whether it is finite (the matrix was
-    positive definite). Under ``vmap`` (with ``plan`` shared) all members factor at once.
+    the pinned-out directions; ``mu`` the Levenberg-Marquardt shift relative to the diagonal.
+    Under ``vmap`` (with ``plan`` shared) all members factor at once. A matrix that is not
+    positive definite gives NaN in the factor, and so in every :func:`solve_factored`.
     """
-    args = jax.tree.map(lambda a: jnp.asarray(a)[None], (blocks, proj, scale, mu, rhs))
-    out, ok = _batched(plan, *args)
+    args = jax.tree.map(lambda a: jnp.asarray(a)[None], (blocks, proj, scale, mu))
+    return jax.tree.map(lambda a: a[..., 0], _factor_batched(plan, *args))
+
+
+@factor.def_vmap
+def _factor_vmap(axis_size, in_batched, plan, blocks, proj, scale, mu):
+    if any(jax.tree.leaves(in_batched[0])):  # a plan per member: no shared pattern
+        axes = jax.tree.map(lambda batched: 0 if batched else None, in_batched)
+        out = jax.vmap(factor.fun, in_axes=tuple(axes))(plan, blocks, proj, scale, mu)
+        return out, jax.tree.map(lambda _: True, out)
+    args = jax.tree.map(
+        lambda a, batched: a if batched else jnp.broadcast_to(a, (axis_size, *a.shape)),
+        (blocks, proj, scale, mu),
+        tuple(in_batched[1:]),
+    )
+    # batch-first at the boundary: solve_factored moves it back (XLA cancels the transposes)
+    out = jax.tree.map(_batch_first, _factor_batched(plan, *args))
+    return out, jax.tree.map(lambda _: True, out)
+
+
+@jax.custom_batching.custom_vmap
+def solve_factored(plan: BlockPlan, factor: Factor, rhs: Array) -> tuple[Array, Array]:
+    """``(V, 3)`` solution of the factored system for ``rhs`` (V, 3), and whether it is finite."""
+    out, ok = _solve_batched(plan, jax.tree.map(lambda a: a[..., None], factor), rhs[None])
     return out[0], ok[0]
 
 
-@solve.def_vmap
-def _solve_vmap(axis_size, in_batched, plan, blocks, proj, scale, mu, rhs):
-    if any(jax.tree.leaves(in_batched[0])):  # a plan per member: no shared pattern
+@solve_factored.def_vmap
+def _solve_factored_vmap(axis_size, in_batched, plan, factor, rhs):
+    if any(jax.tree.leaves(in_batched[0])):
         axes = jax.tree.map(lambda batched: 0 if batched else None, in_batched)
-        return jax.vmap(solve.fun, in_axes=tuple(axes))(plan, blocks, proj, scale, mu, rhs), (
-            True,
-            True,
-        )
-    args = (blocks, proj, scale, mu, rhs)
-    args = jax.tree.map(
-        lambda a, batched: a if batched else jnp.broadcast_to(a, (axis_size, *a.shape)),
-        args,
-        tuple(in_batched[1:]),
+        return jax.vmap(solve_factored.fun, in_axes=tuple(axes))(plan, factor, rhs), (True, True)
+    factor = jax.tree.map(
+        lambda a, batched: (
+            _batch_last(a) if batched else jnp.broadcast_to(a[..., None], (*a.shape, axis_size))
+        ),
+        factor,
+        in_batched[1],
     )
-    return _batched(plan, *args), (True, True)
+    rhs = rhs if in_batched[2] else jnp.broadcast_to(rhs, (axis_size, *rhs.shape))
+    return _solve_batched(plan, factor, rhs), (True, True)
+
+
+def solve(
+    plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array, rhs: Array
+) -> tuple[Array, Array]:
+    """:func:`factor` then :func:`solve_factored`: the solution (V, 3) of ``(H + mu diag H +
+    floor) d = rhs`` and whether it is finite (the matrix was positive definite)."""
+    return solve_factored(plan, factor(plan, blocks, proj, scale, mu), rhs)

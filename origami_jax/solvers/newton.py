@@ -15,14 +15,16 @@ Hessian can be indefinite, so the method works with two matrices:
 A Levenberg-Marquardt shift ``mu * diag(H)`` (``mu`` from ``mu_min``, grown 10x whenever no step
 is found) keeps the system non-singular on mechanisms and free hinges. Rigid motions are gauged
 out as in the other solvers (the pinned vertices' blocks are projected, their complement set to
-a stiffness-sized identity). The step is limited to ``max_step`` per vertex and backtracked
-(Armijo) on the energy.
+a stiffness-sized identity). The step is bent by geodesic acceleration (``acceleration``: a
+second solve with the same factor corrects the bar lengths' and fold angles' second-order
+change along the step), limited by ``max_turn`` and backtracked (Armijo) on the energy.
 
 The linear system is solved dense (Cholesky, inside ``jit``; vmap-able) for small patterns and
-sparse for large ones: SuperLU from scipy (already a dependency of jax) on the matrix in a
-fill-reducing nested-dissection order of the flat pattern, called through ``jax.pure_callback``.
-A batch of one topology (``fold_batch``'s shared index arrays) solves all its members at once
-with the block-sparse Cholesky of :mod:`origami_jax.solvers.blocksparse` instead.
+sparse for large ones, on the host through ``jax.pure_callback``
+(:mod:`origami_jax.solvers.hostsparse`: CHOLMOD when cvxopt is installed, else SuperLU) in a
+fill-reducing nested-dissection order of the flat pattern. A batch of one topology
+(``fold_batch``'s shared index arrays) factors all its members at once with the block-sparse
+Cholesky of :mod:`origami_jax.solvers.blocksparse` instead.
 
 Example:
   >>> from origami_jax import fold, patterns
@@ -42,10 +44,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from jax import Array
 
-from origami_jax.energy import Structure, hinge_goals, initial_reference
+from origami_jax.energy import Structure, hinge_goals, initial_reference, residuals
 from origami_jax.geometry import (
     bar_lengths,
     dihedral_angles,
@@ -54,7 +55,7 @@ from origami_jax.geometry import (
     fold_angles,
 )
 from origami_jax.pattern import Mesh
-from origami_jax.solvers import blocksparse
+from origami_jax.solvers import blocksparse, hostsparse
 from origami_jax.solvers.base import (
     Problem,
     Progress,
@@ -386,48 +387,35 @@ def energy_noise(x: Array, problem: Problem, reference: Array, value: Array) -> 
     return 16 * eps * (jnp.abs(value) + work)
 
 
-def _host_sparse_solve(indptr, indices, data, rhs):
-    """SuperLU on the symmetric matrix, already in a fill-reducing order; never raises."""
-    n = rhs.shape[0]
-    try:
-        matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n)).tocsc()
-        lu = spla.splu(
-            matrix,
-            permc_spec="NATURAL",
-            diag_pivot_thresh=0.0,
-            options={"SymmetricMode": True},
-        )
-        x = lu.solve(np.asarray(rhs))
-        ok = bool(np.all(np.isfinite(x)))
-    except (RuntimeError, ValueError):
-        x, ok = np.zeros_like(rhs), False
-    return x.astype(rhs.dtype), np.asarray(ok)
-
-
 def _cholesky_solve(matrix: Array, rhs: Array) -> Array:
     """``matrix^-1 rhs`` by Cholesky (LAPACK), NaN where ``matrix`` is not positive definite."""
     return jax.scipy.linalg.cho_solve((jnp.linalg.cholesky(matrix), True), rhs)
 
 
-@jax.custom_batching.custom_vmap
-def _dense_solve(matrix: Array, rhs: Array) -> Array:
-    """:func:`_cholesky_solve`, one member at a time under ``vmap`` (forward-mode
-    differentiable; like Newton's ``while_loop``, not reverse-mode)."""
-    return _cholesky_solve(matrix, rhs)
+def _one_member_at_a_time(fn):
+    """``fn`` as a ``custom_vmap`` whose batched rule loops over the members (``lax.map``):
+    jaxlib's batched LAPACK kernels split their batch over XLA's CPU thread pool and wait for
+    it from inside the pool, which deadlocks when several CPU devices (fold_batch's shards) run
+    at once. Forward-mode differentiable; like Newton's ``while_loop``, not reverse-mode."""
+    wrapped = jax.custom_batching.custom_vmap(fn)
+
+    @wrapped.def_vmap
+    def _rule(axis_size, in_batched, *args):
+        if not any(in_batched):  # only tangents batched (jacfwd): nothing to split
+            return fn(*args), False
+        args = tuple(
+            a if batched else jnp.broadcast_to(a, (axis_size, *a.shape))
+            for a, batched in zip(args, in_batched, strict=True)
+        )
+        return jax.lax.map(lambda pair: fn(*pair), args), True
+
+    return functools.wraps(fn)(wrapped)
 
 
-@_dense_solve.def_vmap
-def _dense_solve_vmap(axis_size, in_batched, matrix, rhs):
-    if not any(in_batched):  # only tangents batched (jacfwd): nothing to split
-        return _cholesky_solve(matrix, rhs), False
-    # one LAPACK call per member, in a loop: jaxlib's batched Cholesky splits its batch over
-    # XLA's CPU thread pool and waits for it from inside the pool, which deadlocks when
-    # several CPU devices (fold_batch's shards) run at once
-    matrix, rhs = (
-        a if batched else jnp.broadcast_to(a, (axis_size, *a.shape))
-        for a, batched in zip((matrix, rhs), in_batched, strict=True)
-    )
-    return jax.lax.map(lambda pair: _cholesky_solve(*pair), (matrix, rhs)), True
+_dense_factor = _one_member_at_a_time(jnp.linalg.cholesky)
+_dense_solve_factored = _one_member_at_a_time(
+    lambda factor, rhs: jax.scipy.linalg.cho_solve((factor, True), rhs)
+)
 
 
 class NewtonState(NamedTuple):
@@ -456,6 +444,10 @@ class Newton:
       mu_min: smallest Levenberg-Marquardt shift, relative to the matrix diagonal.
       max_turn: largest relative displacement of the two ends of any bar in one step, over its
         rest length (about the largest rotation of any piece of paper per step, radians).
+      acceleration: geodesic acceleration (see ``_attempt``): the largest ``2 |a| / |v|`` of the
+        second-order correction ``a`` to the step ``v`` that is used; 0 turns it off. It costs
+        a second solve with the same factorization and took Miura-ori 4 x 4 from 20 to 11
+        iterations on average, the waterbomb base from 23 to 15 (``tests/test_solvers.py``).
       max_linesearch_steps: halvings of the step before an iteration gives up.
       max_stalls: iterations in a row without a step before giving up (STALLED).
       patience: iterations with neither a new lowest energy nor a new smallest gradient before
@@ -466,6 +458,7 @@ class Newton:
     dense_max: int = 200
     mu_min: float = 1e-10
     max_turn: float = 0.5
+    acceleration: float = 10.0
     max_linesearch_steps: int = 40
     max_stalls: int = 12
     patience: int = 30
@@ -507,60 +500,107 @@ class Newton:
             progress=Progress(gmax, value, zero),
         )
 
-    def _direction(self, s: NewtonState, problem: Problem, exact: Array) -> tuple[Array, Array]:
-        """Solve ``(H + mu diag H) d = -g``; (V, 3) step and whether the solve succeeded."""
+    def _factor(self, s: NewtonState, problem: Problem, exact: Array, keep: bool):
+        """Factor ``H + mu diag H`` (exact or convex ``H``); returns ``(solve, ok)`` with
+        ``solve(rhs) -> (step, ok)`` for (V, 3) right-hand sides: the first call gives the
+        Newton step, the second (only with ``keep``) reuses the factorization."""
         layout: HessianLayout = problem.aux
         x = positions(problem, s.u)
         if layout.plan is not None:
             structure, params = problem.structure, problem.params
             blocks = element_blocks(x, structure, params, s.reference, exact)
             proj = _vertex_projectors(x.shape[0], problem.pinned, problem.projectors)
-            step, ok = blocksparse.solve(
-                layout.plan, blocks, proj, _gauge_scale(problem), s.mu, -s.grad
-            )
-            return jnp.where(ok, step, 0.0), ok
+            factor = blocksparse.factor(layout.plan, blocks, proj, _gauge_scale(problem), s.mu)
+            return functools.partial(blocksparse.solve_factored, layout.plan, factor)
         values = gauged_hessian(x, problem, s.reference, exact)
         diag = values[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]]
         floor = jnp.finfo(x.dtype).eps * jnp.max(diag)
         values = values.at[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]].add(
             s.mu * diag + floor
         )
-        rhs = jnp.zeros(layout.size, x.dtype).at[layout.order].set(-s.grad.reshape(-1))
-        if layout.sparse:
-            sol, ok = jax.pure_callback(
-                _host_sparse_solve,
-                (
-                    jax.ShapeDtypeStruct(rhs.shape, rhs.dtype),
-                    jax.ShapeDtypeStruct((), jnp.bool_),
-                ),
-                layout.indptr,
-                layout.indices,
-                values,
-                rhs,
-                vmap_method="sequential",
-            )
-        else:
-            sol = _dense_solve(values.reshape(layout.size, layout.size), rhs)
-            ok = jnp.all(jnp.isfinite(sol))
-        step = sol[layout.order].reshape(s.u.shape)
-        return jnp.where(ok, step, 0.0), ok
+
+        def ordered(rhs):
+            return jnp.zeros(layout.size, x.dtype).at[layout.order].set(rhs.reshape(-1))
+
+        def unordered(sol):
+            return sol[layout.order].reshape(x.shape)
+
+        if not layout.sparse:
+            chol = _dense_factor(values.reshape(layout.size, layout.size))
+
+            def dense(rhs):
+                sol = unordered(_dense_solve_factored(chol, ordered(rhs)))
+                return sol, jnp.all(jnp.isfinite(sol))
+
+            return dense
+        token = []  # the host factorization's token, after the first solve
+
+        def sparse(rhs):
+            b = ordered(rhs)
+            if token:
+                sol = jax.pure_callback(
+                    hostsparse.resolve,
+                    jax.ShapeDtypeStruct(b.shape, b.dtype),
+                    token[0],
+                    b,
+                    vmap_method="sequential",
+                )
+            else:
+                sol, ok, t = jax.pure_callback(
+                    functools.partial(hostsparse.factor_solve, keep=keep),
+                    (
+                        jax.ShapeDtypeStruct(b.shape, b.dtype),
+                        jax.ShapeDtypeStruct((), jnp.bool_),
+                        jax.ShapeDtypeStruct((), jnp.int64),
+                    ),
+                    layout.indptr,
+                    layout.indices,
+                    values,
+                    b,
+                    vmap_method="sequential",
+                )
+                token.append(t)
+                return unordered(sol), ok
+            sol = unordered(sol)
+            return sol, jnp.all(jnp.isfinite(sol))
+
+        return sparse
 
     def _attempt(self, s: NewtonState, problem: Problem, exact: Array):
-        """Direction, limited step and backtracking: (u, energy, accepted, full step taken)."""
-        step, ok = self._direction(s, problem, exact)
+        """Step, limit and backtracking: (u, energy, accepted, full step taken).
+
+        With ``acceleration`` the step follows the curve ``u + t v + t^2 a / 2`` of geodesic
+        acceleration (Transtrum & Sethna 2012): ``v`` the Newton step, ``a`` the correction of
+        the residuals' (bar lengths', fold angles') second-order change along ``v``, solved with
+        the same factorization. On a stiff sheet a straight step stretches every bar it turns
+        (to second order); the curve keeps them nearer their length, so longer steps pass the
+        line search. ``a`` is dropped when ``2 |a| / |v| > acceleration``.
+        """
+        accelerate = self.acceleration > 0
+        solve = self._factor(s, problem, exact, keep=accelerate)
+        step, ok = solve(-s.grad)
+        step = jnp.where(ok, step, 0.0)
+        if accelerate:
+            curve = jnp.where(ok, self._acceleration(s, problem, step, solve), 0.0)
+        else:
+            curve = jnp.zeros_like(step)
         # limit how far any bar turns or stretches in one step (relative displacement of its
         # ends over its length): rigid motion of far-away paper costs nothing, and no hinge
         # turns by enough to jump branches
         bars = problem.structure.bars
-        rel = step[bars[:, 1]] - step[bars[:, 0]]
+        full_step = step + 0.5 * curve
+        rel = full_step[bars[:, 1]] - full_step[bars[:, 0]]
         largest = jnp.max(jnp.sqrt(jnp.sum(rel * rel, axis=-1)) / problem.params.rest_length)
         limit = jnp.minimum(1.0, self.max_turn / jnp.maximum(largest, 1e-300))
-        step = step * limit
-        slope = jnp.vdot(s.grad, step)
+        slope = limit * jnp.vdot(s.grad, step)
         ok = ok & (slope < 0)
 
+        def point(alpha):
+            t = alpha * limit
+            return s.u + t * step + (0.5 * t * t) * curve
+
         def value_at(alpha):
-            return objective(s.u + alpha * step, problem, s.reference)
+            return objective(point(alpha), problem, s.reference)
 
         noise = energy_noise(positions(problem, s.u), problem, s.reference, s.energy)
 
@@ -581,7 +621,21 @@ class Newton:
         alpha, value, _ = jax.lax.while_loop(cond, body, (one, value_at(one), 0))
         accepted = ok & sufficient(alpha, value)
         full = accepted & (alpha == 1) & (limit == 1)
-        return s.u + alpha * step, value, accepted, full
+        return point(alpha), value, accepted, full
+
+    def _acceleration(self, s: NewtonState, problem: Problem, velocity: Array, solve) -> Array:
+        """``a = -H^-1 J^T W r''[v, v]`` (zero when too large or not finite)."""
+        structure, params = problem.structure, problem.params
+
+        def res(u):
+            return residuals(positions(problem, u), structure, params, s.reference)[0]
+
+        weights = residuals(positions(problem, s.u), structure, params, s.reference)[1]
+        second = jax.jvp(lambda u: jax.jvp(res, (u,), (velocity,))[1], (s.u,), (velocity,))[1]
+        pull = jax.vjp(res, s.u)[1](weights * second)[0]
+        curve, ok = solve(-pull)
+        small = 2 * jnp.linalg.norm(curve) <= self.acceleration * jnp.linalg.norm(velocity)
+        return jnp.where(ok & small, curve, 0.0)
 
     def step(self, s: NewtonState, problem: Problem) -> NewtonState:
         """One Newton iteration (pure)."""
@@ -595,7 +649,7 @@ class Newton:
         take = finite
         stalls = jnp.where(take, 0, jnp.where(retry, s.stalls, s.stalls + 1))
         progress = s.progress.update(take, gmax, new_value)
-        converged = take & has_converged(gmax, s.grad_max0, problem)
+        converged = take & has_converged(gmax, s.grad_max0, problem, s.grad_max)
         stalled = (stalls >= self.max_stalls) | (progress.since_best >= self.patience)
         nonfinite = accepted & ~finite
         status = next_status(converged, ~nonfinite, stalled)

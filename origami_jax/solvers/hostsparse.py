@@ -1,0 +1,193 @@
+"""Sparse Cholesky of a Newton system on the host, called from ``jit`` through ``pure_callback``.
+
+The matrix comes as full symmetric CSR arrays ``(indptr, indices, data)`` already in a
+fill-reducing order (the nested dissection of :func:`origami_jax.solvers.newton.hessian_layout`).
+Two backends, picked once:
+
+* **CHOLMOD** (supernodal Cholesky, from ``cvxopt`` when it is installed:
+  ``pip install "origami-jax[cholmod]"``). Its symbolic analysis is done once per sparsity
+  pattern and kept; each call only factors numerically. On this project's 2-core machine it
+  factored the Hessian of a Miura-ori 100 x 100 (30,603 unknowns, 1.2 million stored entries)
+  in 0.11 s and solved in 0.013 s, where SuperLU took 0.70 s for both (2026-12-02, best of 3,
+  the same matrix). cvxopt is GPL-3 licensed; it is optional.
+* **SuperLU** from scipy (a dependency of jax), in symmetric mode without pivoting, otherwise
+  (a pivot that is not positive counts as a failure, as in Cholesky).
+
+A factorization can be kept for a second right-hand side (Newton's geodesic acceleration):
+:func:`factor_solve` with ``keep=True`` returns a token, and :func:`resolve` solves with it
+once and releases it. Nothing here raises: a matrix that does not factor gives ``ok=False``
+and a zero solution (as one that is not positive definite); an unknown token gives NaN.
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+from collections import OrderedDict
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+try:  # optional: CHOLMOD
+    from cvxopt import cholmod as _cholmod
+    from cvxopt import matrix as _cvx_matrix
+    from cvxopt import spmatrix as _cvx_spmatrix
+except ImportError:  # pragma: no cover - depends on the environment
+    _cholmod = None
+
+__all__ = ["backend", "factor_solve", "resolve", "solve"]
+
+_KEPT_MAX = 4096  # kept factorizations never released (an interrupted solve) are dropped
+
+
+def backend() -> str:
+    """``"cholmod"`` when cvxopt is installed, else ``"superlu"``."""
+    return "superlu" if _cholmod is None else "cholmod"
+
+
+class _Cholmod:
+    """One sparsity pattern's CHOLMOD analysis: the lower triangle's pattern and a pool of
+    symbolic factors (each holds one numeric factor at a time, so kept factors need one each)."""
+
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray):
+        n = indptr.shape[0] - 1
+        self.indptr, self.indices = indptr.copy(), indices.copy()
+        rows = np.repeat(np.arange(n), np.diff(indptr))
+        # CSR's upper triangle, row by row, is the lower triangle's CSC (symmetric matrix)
+        self.upper = np.flatnonzero(indices >= rows)
+        self.matrix = _cvx_spmatrix(
+            np.zeros(len(self.upper)),
+            _cvx_matrix(indices[self.upper].astype(np.int32)),
+            _cvx_matrix(rows[self.upper].astype(np.int32)),
+            (n, n),
+        )
+        self.identity = _cvx_matrix(np.arange(n, dtype=np.int32))
+        self.free: list = []
+
+    def matches(self, indptr: np.ndarray, indices: np.ndarray) -> bool:
+        return np.array_equal(indptr, self.indptr) and np.array_equal(indices, self.indices)
+
+    def factor(self, data: np.ndarray):
+        """A numeric factor of ``data`` (a symbolic factor from the pool), or ``None``."""
+        with _cholmod_options():
+            if self.free:
+                symbolic = self.free.pop()
+            else:
+                symbolic = _cholmod.symbolic(self.matrix, p=self.identity)
+            self.matrix.V = _cvx_matrix(np.ascontiguousarray(data[self.upper], np.float64))
+            try:
+                _cholmod.numeric(self.matrix, symbolic)
+            except ArithmeticError:  # not positive definite
+                self.free.append(symbolic)
+                return None
+        return symbolic
+
+    def solve(self, numeric, rhs: np.ndarray) -> np.ndarray:
+        b = _cvx_matrix(np.array(rhs, np.float64))
+        with _cholmod_options():
+            _cholmod.solve(numeric, b)
+        return np.asarray(b).ravel()
+
+
+class _cholmod_options:
+    """Supernodal factorization in the given order; cvxopt's global options restored after."""
+
+    def __enter__(self):
+        self.saved = dict(_cholmod.options)
+        _cholmod.options.update(supernodal=2, postorder=True)
+
+    def __exit__(self, *exc):
+        _cholmod.options.clear()
+        _cholmod.options.update(self.saved)
+
+
+_PATTERNS: list[_Cholmod] = []  # the most recent patterns, newest last
+_KEPT: OrderedDict[int, tuple] = OrderedDict()
+_TOKENS = itertools.count(1)
+_LOCK = threading.Lock()  # callbacks may come from several threads (devices)
+
+
+def _pattern(indptr: np.ndarray, indices: np.ndarray) -> _Cholmod:
+    for p in _PATTERNS:
+        if p.matches(indptr, indices):
+            return p
+    p = _Cholmod(indptr, indices)
+    _PATTERNS.append(p)
+    del _PATTERNS[:-4]
+    return p
+
+
+def _factor(indptr, indices, data):
+    """``(solve, release)`` of the factored matrix, or ``None`` if it does not factor."""
+    indptr, indices, data = np.asarray(indptr), np.asarray(indices), np.asarray(data)
+    if not np.all(np.isfinite(data)):
+        return None
+    if _cholmod is not None:
+        pattern = _pattern(indptr, indices)
+        numeric = pattern.factor(data)
+        if numeric is None:
+            return None
+        return (lambda b: pattern.solve(numeric, b)), (lambda: pattern.free.append(numeric))
+    n = indptr.shape[0] - 1
+    try:
+        matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n)).tocsc()
+        lu = spla.splu(
+            matrix, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+        )
+    except (RuntimeError, ValueError):
+        return None
+    # without pivoting, U's diagonal is D of L D L^T: all positive iff positive definite
+    if not np.all(lu.U.diagonal() > 0):
+        return None
+    return lu.solve, lambda: None
+
+
+def _finish(x: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, bool]:
+    ok = bool(np.all(np.isfinite(x)))
+    return (x if ok else np.zeros_like(x)).astype(rhs.dtype), ok
+
+
+def factor_solve(indptr, indices, data, rhs, keep: bool = False):
+    """``(x, ok, token)``: the solution of ``A x = rhs`` and, with ``keep``, a token of the
+    factorization for :func:`resolve` (``0`` when none is kept)."""
+    rhs = np.asarray(rhs)
+    with _LOCK:
+        return _factor_solve(indptr, indices, data, rhs, keep)
+
+
+def _factor_solve(indptr, indices, data, rhs, keep):
+    found = _factor(indptr, indices, data)
+    if found is None:
+        return np.zeros_like(rhs), np.asarray(False), np.asarray(0, np.int64)
+    solve_fn, release = found
+    x, ok = _finish(solve_fn(rhs), rhs)
+    token = 0
+    if keep and ok:
+        token = next(_TOKENS)
+        _KEPT[token] = found
+        while len(_KEPT) > _KEPT_MAX:
+            _KEPT.popitem(last=False)[1][1]()
+    else:
+        release()
+    return x, np.asarray(ok), np.asarray(token, np.int64)
+
+
+def resolve(token, rhs):
+    """Solve with a kept factorization and release it; NaN for an unknown token."""
+    rhs = np.asarray(rhs)
+    with _LOCK:
+        found = _KEPT.pop(int(token), None)
+        if found is None:
+            return np.full_like(rhs, np.nan)
+        solve_fn, release = found
+        x = solve_fn(rhs).astype(rhs.dtype)
+        release()
+    return x
+
+
+def solve(indptr, indices, data, rhs):
+    """``(x, ok)``: the solution of ``A x = rhs`` (zero and ``ok=False`` if ``A`` does not
+    factor)."""
+    x, ok, _ = factor_solve(indptr, indices, data, rhs)
+    return x, ok
