@@ -32,6 +32,7 @@ import csv
 import functools
 import os
 import platform
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -161,8 +162,17 @@ def main(argv=None) -> int:
         f"sparse Newton solves: {hostsparse.backend()}"
     )
     only = None if args.solvers is None else set(args.solvers.split(","))
+    if args.part == "all":
+        # one process per part: a single process compiling every part's shapes ran out of
+        # memory mappings (LLVM "Cannot allocate memory" at the 65,530 of vm.max_map_count)
+        argv = list(sys.argv[1:] if argv is None else argv)
+        for part in PARTS:
+            code = subprocess.call([sys.executable, __file__, *argv, "--part", part])
+            if code:
+                return code
+        return 0
     for part, (make_cases, prefix, with_plots, max_time) in PARTS.items():
-        if args.part not in ("all", part):
+        if args.part != part:
             continue
         max_time = max_time if args.max_time is None else args.max_time
         if part == "batch":

@@ -430,6 +430,8 @@ class NewtonState(NamedTuple):
     mu: Array  # Levenberg-Marquardt shift, relative to the diagonal
     exact: Array  # try the exact Hessian in the next iteration
     stalls: Array  # iterations in a row without an accepted step
+    failures: Array  # exact-Hessian attempts rejected since the last accepted one
+    cooldown: Array  # full convex steps still to take before the next exact attempt
     progress: Progress
 
 
@@ -497,6 +499,8 @@ class Newton:
             mu=jnp.asarray(self.mu_min, u.dtype),
             exact=jnp.zeros((), bool),
             stalls=zero,
+            failures=zero,
+            cooldown=zero,
             progress=Progress(gmax, value, zero),
         )
 
@@ -639,8 +643,8 @@ class Newton:
 
     def step(self, s: NewtonState, problem: Problem) -> NewtonState:
         """One Newton iteration (pure)."""
-        # one attempt per iteration (one linear solve compiled): an exact-Hessian attempt that
-        # fails costs an iteration and hands over to the convex part, without penalty
+        # one attempt per iteration (one factorization compiled): an exact-Hessian attempt that
+        # fails costs an iteration and hands over to the convex part
         u, value, accepted, full = self._attempt(s, problem, s.exact)
         retry = s.exact & ~accepted
         new_value, grad = jax.value_and_grad(objective)(u, problem, s.reference)
@@ -648,6 +652,14 @@ class Newton:
         finite = accepted & jnp.isfinite(new_value) & jnp.isfinite(gmax)
         take = finite
         stalls = jnp.where(take, 0, jnp.where(retry, s.stalls, s.stalls + 1))
+        # a rejected exact attempt costs an iteration: after the n-th in a row, wait for
+        # 2^n - 1 full convex steps (at most 15) before the next
+        failures = jnp.where(retry, s.failures + 1, jnp.where(take & s.exact, 0, s.failures))
+        cooldown = jnp.where(
+            retry,
+            2 ** jnp.minimum(failures, 4) - 1,
+            jnp.where(take & full, jnp.maximum(s.cooldown - 1, 0), s.cooldown),
+        )
         progress = s.progress.update(take, gmax, new_value)
         converged = take & has_converged(gmax, s.grad_max0, problem, s.grad_max)
         stalled = (stalls >= self.max_stalls) | (progress.since_best >= self.patience)
@@ -674,8 +686,10 @@ class Newton:
             grad_max0=s.grad_max0,
             status=status,
             mu=mu,
-            exact=take & (full | s.exact),
+            exact=take & (s.exact | (full & (cooldown == 0))),
             stalls=stalls,
+            failures=failures.astype(s.failures.dtype),
+            cooldown=cooldown.astype(s.cooldown.dtype),
             progress=progress,
         )
 
