@@ -36,7 +36,7 @@ try:  # optional: CHOLMOD
 except ImportError:  # pragma: no cover - depends on the environment
     _cholmod = None
 
-__all__ = ["backend", "factor_solve", "resolve", "solve"]
+__all__ = ["backend", "factor_solve", "resolve", "solve", "superlu"]
 
 _KEPT_MAX = 4096  # kept factorizations never released (an interrupted solve) are dropped
 
@@ -129,6 +129,16 @@ def _factor(indptr, indices, data):
         if numeric is None:
             return None
         return (lambda b: pattern.solve(numeric, b)), (lambda: pattern.free.append(numeric))
+    found = superlu(indptr, indices, data)
+    # without pivoting, U's diagonal is D of L D L^T: all positive iff positive definite
+    if found is None or not np.all(found[1] > 0):
+        return None
+    return found[0].solve, lambda: None
+
+
+def superlu(indptr, indices, data) -> tuple[spla.SuperLU, np.ndarray] | None:
+    """SuperLU of the symmetric matrix in its given order, without pivoting, and its pivots
+    (``U``'s diagonal, which is ``D`` of ``L D L^T``); ``None`` if it does not factor."""
     n = indptr.shape[0] - 1
     try:
         matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n)).tocsc()
@@ -137,10 +147,7 @@ def _factor(indptr, indices, data):
         )
     except (RuntimeError, ValueError):
         return None
-    # without pivoting, U's diagonal is D of L D L^T: all positive iff positive definite
-    if not np.all(lu.U.diagonal() > 0):
-        return None
-    return lu.solve, lambda: None
+    return lu, lu.U.diagonal()
 
 
 def _finish(x: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, bool]:

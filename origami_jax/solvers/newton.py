@@ -508,9 +508,9 @@ class Newton:
         )
 
     def _factor(self, s: NewtonState, problem: Problem, exact: Array, keep: bool):
-        """Factor ``H + mu diag H`` (exact or convex ``H``); returns ``(solve, ok)`` with
-        ``solve(rhs) -> (step, ok)`` for (V, 3) right-hand sides: the first call gives the
-        Newton step, the second (only with ``keep``) reuses the factorization."""
+        """Factor ``H + mu diag H`` (exact or convex ``H``); returns ``solve(rhs) -> (step,
+        ok)`` for (V, 3) right-hand sides: the first call gives the Newton step, the second
+        (only with ``keep``) reuses the factorization."""
         layout: HessianLayout = problem.aux
         x = positions(problem, s.u)
         if layout.plan is not None:
@@ -635,11 +635,15 @@ class Newton:
         structure, params = problem.structure, problem.params
 
         def res(u):
-            return residuals(positions(problem, u), structure, params, s.reference)[0]
+            return residuals(positions(problem, u), structure, params, s.reference)
 
-        weights = residuals(positions(problem, s.u), structure, params, s.reference)[1]
-        second = jax.jvp(lambda u: jax.jvp(res, (u,), (velocity,))[1], (s.u,), (velocity,))[1]
-        pull = jax.vjp(res, s.u)[1](weights * second)[0]
+        _, transpose, weights = jax.vjp(res, s.u, has_aux=True)  # weights: constant in u
+
+        def rate(u):
+            return jax.jvp(lambda u: res(u)[0], (u,), (velocity,))[1]
+
+        second = jax.jvp(rate, (s.u,), (velocity,))[1]
+        pull = transpose(weights * second)[0]
         curve, ok = solve(-pull)
         small = 2 * jnp.linalg.norm(curve) <= self.acceleration * jnp.linalg.norm(velocity)
         return jnp.where(ok & small, curve, 0.0)
