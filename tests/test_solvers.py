@@ -163,6 +163,18 @@ def test_geodesic_acceleration_saves_iterations_and_changes_no_answer(cp):
         np.testing.assert_allclose(curved.positions, plain.positions, atol=1e-8)
 
 
+def test_step_expansion_saves_iterations_and_changes_no_answer():
+    """Doubling full steps while the energy falls: the same rigid fold of a 12 x 12 Miura-ori
+    in fewer iterations (17 -> 15 measured 2026-12-03; 30 x 30: 24 -> 19)."""
+    cp = patterns.miura_ori(12, 12)
+    plain = fold(cp, solver=Newton(expansions=0))
+    expanded = fold(cp, solver=Newton())
+    assert plain.converged and expanded.converged
+    assert expanded.iterations < plain.iterations
+    np.testing.assert_allclose(expanded.positions, plain.positions, atol=1e-9 * cp.diameter)
+    assert expanded.fold_angle_error_max < 1e-9
+
+
 def test_newton_element_hessians_match_autodiff():
     """The assembled exact Hessian equals jax.hessian of the energy (gauge off)."""
     from origami_jax.energy import energy, initial_reference

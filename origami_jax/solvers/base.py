@@ -19,7 +19,7 @@ import numpy as np
 from jax import Array
 
 from origami_jax.energy import FoldParams, Structure, energy
-from origami_jax.pattern import Mesh, PatternError, find_root
+from origami_jax.pattern import Mesh, PatternError
 
 __all__ = [
     "Status",
@@ -162,21 +162,38 @@ def prepare(solver, problem: Problem, mesh: Mesh) -> Problem:
     return problem if hook is None else hook(problem, mesh)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` over the last axis of length 3, without its overhead on small arrays."""
+    i, j = [1, 2, 0], [2, 0, 1]
+    return a[..., i] * b[..., j] - a[..., j] * b[..., i]
+
+
+def _doubled_areas(p: np.ndarray) -> np.ndarray:
+    """(T,) twice the area of triangles ``p`` (T, 3, 3)."""
+    n = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    return np.sqrt(np.sum(n * n, axis=1))
+
+
+def _triangle_pieces(tris: np.ndarray, num_vertices: int) -> np.ndarray:
+    """(T,) the connected piece of each triangle, named by its lowest vertex: labels spread
+    by minimum over triangles, with pointer jumping (vectorized; no graph object to build)."""
+    label = np.arange(num_vertices)
+    while True:
+        new = label.copy()
+        np.minimum.at(new, tris, label[tris].min(axis=1)[:, None])
+        new = new[new]
+        if np.array_equal(new, label):
+            return label[tris[:, 0]]
+        label = new
+
+
 def rigid_gauge(mesh: Mesh, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per connected piece, pin the triangle nearest its centroid: vertex a fixed, b on the line
     ab, c in the plane abc. That removes exactly the 6 rigid motions and nothing else."""
     tris = mesh.triangles
-    parent = np.arange(mesh.num_vertices)
-    for a, b, c in tris:
-        root = find_root(parent, a)
-        parent[find_root(parent, b)] = root
-        parent[find_root(parent, c)] = root
-    piece_of_tri = np.array([find_root(parent, t[0]) for t in tris])
+    piece_of_tri = _triangle_pieces(tris, mesh.num_vertices)
     p = start[tris]
-    rest = mesh.vertices[tris]
-    area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    rest_area = np.linalg.norm(np.cross(rest[:, 1] - rest[:, 0], rest[:, 2] - rest[:, 0]), axis=1)
-    usable = area > 1e-6 * rest_area
+    usable = _doubled_areas(p) > 1e-6 * _doubled_areas(mesh.vertices[tris])
     pinned, projectors = [], []
     for piece in np.unique(piece_of_tri):
         members = np.flatnonzero(piece_of_tri == piece)
@@ -190,9 +207,8 @@ def rigid_gauge(mesh: Mesh, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             )
         a, b, c = tris[good[0]]
         d = start[b] - start[a]
-        d /= np.linalg.norm(d)
-        n = np.cross(start[b] - start[a], start[c] - start[a])
-        n /= np.linalg.norm(n)
+        n = _cross(d, start[c] - start[a])
+        d, n = d / np.sqrt(d @ d), n / np.sqrt(n @ n)
         pinned += [a, b, c]
         projectors += [np.zeros((3, 3)), np.outer(d, d), np.eye(3) - np.outer(n, n)]
     return np.array(pinned, np.int32), np.array(projectors)
@@ -223,9 +239,9 @@ def make_problem(
 def default_max_step(mesh: Mesh) -> float:
     """Half the median altitude of the triangles: a step turns a typical hinge < ~30 deg."""
     p = mesh.vertices[mesh.triangles]
-    area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    longest = np.max(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2), axis=1)
-    return float(0.5 * np.median(area2 / longest))
+    edges = p - p[:, [2, 0, 1]]
+    longest = np.sqrt(np.max(np.sum(edges * edges, axis=2), axis=1))
+    return float(0.5 * np.median(_doubled_areas(p) / longest))
 
 
 def gauge(problem: Problem, u: Array) -> Array:
