@@ -14,8 +14,12 @@ Hessian can be indefinite, so the method works with two matrices:
   rejected exact attempt in a row the next waits for 2^n - 1 full convex steps (at most 15):
   on box.fold, where they alternated, that took 259 iterations down to 59.
 
-A Levenberg-Marquardt shift ``mu * diag(H)`` (``mu`` from ``mu_min``, grown 10x whenever no step
-is found) keeps the system non-singular on mechanisms and free hinges. Rigid motions are gauged
+A Levenberg-Marquardt shift ``mu * diag(H)`` (``mu`` from ``mu_min``, grown 10x, from at least
+1e-10, whenever no step is found, and shrunk 10x with every step taken) keeps the system
+non-singular on mechanisms and free hinges. Its floor ``mu_min`` is 0: a shift that stays
+(1e-10 did, to stop 17) makes the last iterations converge linearly where the exact step
+converges quadratically (Miura-ori 100 x 100: 1.3e-6, 1.4e-8, 1.6e-10 rad against 4.3e-7,
+3.5e-11, 3.9e-14 rad). Rigid motions are gauged
 out as in the other solvers (the pinned vertices' blocks are projected, their complement set to
 a stiffness-sized identity). The step is bent by geodesic acceleration (``acceleration``: a
 second solve with the same factor corrects the bar lengths' and fold angles' second-order
@@ -445,7 +449,8 @@ class Newton:
       linear_solver: ``"auto"`` (dense up to ``dense_max`` vertices, else sparse), ``"dense"``
         or ``"sparse"``.
       dense_max: largest vertex count solved dense under ``"auto"``.
-      mu_min: smallest Levenberg-Marquardt shift, relative to the matrix diagonal.
+      mu_min: smallest Levenberg-Marquardt shift, relative to the matrix diagonal (a rounding
+        sized floor, ``eps`` times the largest diagonal entry, is always added).
       max_turn: largest relative displacement of the two ends of any bar in one step, over its
         rest length (about the largest rotation of any piece of paper per step, radians).
       acceleration: geodesic acceleration (see ``_attempt``): the largest ``2 |a| / |v|`` of the
@@ -468,7 +473,7 @@ class Newton:
 
     linear_solver: str = "auto"
     dense_max: int = 200
-    mu_min: float = 1e-10
+    mu_min: float = 0.0
     max_turn: float = 0.5
     acceleration: float = 10.0
     expansions: int = 3
@@ -705,7 +710,7 @@ class Newton:
         mu = jnp.where(
             take,
             jnp.maximum(self.mu_min, 0.1 * s.mu),
-            jnp.where(retry, s.mu, jnp.minimum(10.0 * s.mu, 1e10)),
+            jnp.where(retry, s.mu, jnp.minimum(10.0 * jnp.maximum(s.mu, 1e-10), 1e10)),
         ).astype(s.mu.dtype)
         return NewtonState(
             u=u,
