@@ -168,8 +168,8 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., i] * b[..., j] - a[..., j] * b[..., i]
 
 
-def _doubled_areas(p: np.ndarray) -> np.ndarray:
-    """(T,) twice the area of triangles ``p`` (T, 3, 3)."""
+def doubled_areas(p: np.ndarray) -> np.ndarray:
+    """(T,) twice the area of triangles ``p`` (T, 3, 3) (host side)."""
     n = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     return np.sqrt(np.sum(n * n, axis=1))
 
@@ -193,7 +193,7 @@ def rigid_gauge(mesh: Mesh, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     tris = mesh.triangles
     piece_of_tri = _triangle_pieces(tris, mesh.num_vertices)
     p = start[tris]
-    usable = _doubled_areas(p) > 1e-6 * _doubled_areas(mesh.vertices[tris])
+    usable = doubled_areas(p) > 1e-6 * doubled_areas(mesh.vertices[tris])
     pinned, projectors = [], []
     for piece in np.unique(piece_of_tri):
         members = np.flatnonzero(piece_of_tri == piece)
@@ -241,7 +241,7 @@ def default_max_step(mesh: Mesh) -> float:
     p = mesh.vertices[mesh.triangles]
     edges = p - p[:, [2, 0, 1]]
     longest = np.sqrt(np.max(np.sum(edges * edges, axis=2), axis=1))
-    return float(0.5 * np.median(_doubled_areas(p) / longest))
+    return float(0.5 * np.median(doubled_areas(p) / longest))
 
 
 def gauge(problem: Problem, u: Array) -> Array:

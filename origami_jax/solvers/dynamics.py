@@ -52,6 +52,7 @@ from origami_jax.solvers.base import (
     Problem,
     Progress,
     Status,
+    doubled_areas,
     has_converged,
     next_status,
     objective,
@@ -83,7 +84,7 @@ class DynamicsState(NamedTuple):
 def lumped_mass(mesh: Mesh) -> np.ndarray:
     """(V,) a third of the flat area of every triangle at each vertex (density 1 per unit area)."""
     p = mesh.vertices[mesh.triangles]
-    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    area = 0.5 * doubled_areas(p)
     mass = np.zeros(mesh.num_vertices)
     np.add.at(mass, mesh.triangles.ravel(), np.repeat(area / 3.0, 3))
     return mass

@@ -647,7 +647,8 @@ class Newton:
         if self.expansions > 0:
 
             def grow(c):
-                return full & c[2] & (c[3] < self.expansions)
+                _, _, better, k = c
+                return full & better & (k < self.expansions)
 
             def double(c):
                 alpha, value, _, k = c
