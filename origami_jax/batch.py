@@ -53,19 +53,25 @@ import numpy as np
 
 from origami_jax.energy import FoldParams, Stiffness, param_arrays, structure_arrays
 from origami_jax.fold import (
+    HISTORY_FIELDS,
     FoldResult,
     _reason,
     _sample,
     compiled,
     default_tol,
-    history_of,
     next_chunk,
 )
 from origami_jax.metrics import METRIC_NAMES
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
 from origami_jax.solvers import Dynamics, Newton, Solver, Status, get_solver
-from origami_jax.solvers.base import Problem, check_start, default_max_step, rigid_gauge
+from origami_jax.solvers.base import (
+    Problem,
+    check_start,
+    default_max_steps,
+    rigid_gauge,
+    rigid_gauges,
+)
 from origami_jax.solvers.blocksparse import block_plan
 from origami_jax.solvers.dynamics import lumped_mass
 from origami_jax.solvers.newton import layout_arrays
@@ -229,10 +235,9 @@ def _padded_aux(solver: Solver, member: _Member, problem: Problem, to: BatchSize
     return None
 
 
-def _member(index, pattern, percent, stiffness, start, tol, dtype) -> _Member:
+def _start(index: int, pattern: CreasePattern, start) -> np.ndarray:
+    """The checked (V, 3) start of problem ``index`` (the pattern's own, else flat)."""
     mesh = pattern.mesh
-    structure = structure_arrays(mesh)
-    params = param_arrays(pattern, percent, stiffness)
     if start is None and pattern.start is not None:
         start = pattern.start[mesh.source_vertex]
     if start is None:
@@ -245,25 +250,52 @@ def _member(index, pattern, percent, stiffness, start, tol, dtype) -> _Member:
     bad = ~np.isfinite(start).all(axis=1)
     if bad.any():
         raise PatternError(f"start {index}: vertex {int(np.flatnonzero(bad)[0])} is not finite")
-    pinned, projectors = rigid_gauge(mesh, start)
-    problem = Problem(
-        structure=structure,
-        params=params,
-        start=start,
-        pinned=pinned,
-        projectors=projectors,
-        tol=np.asarray(tol),
-        max_step=np.asarray(default_max_step(mesh)),
-    )
-    sizes = BatchSizes(
-        mesh.num_vertices,
-        len(structure.bars),
-        structure.num_creases,
-        structure.num_facets,
-        len(structure.free),
-        len(pinned),
-    )
-    return _Member(index, pattern, problem, sizes)
+    return start
+
+
+def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
+    """The problems (unpadded, NumPy leaves): index arrays, gauges and step limits computed
+    once for all the patterns of one mesh topology (on arrays this small Python's per-call
+    overhead costs more than the arithmetic: 0.4 ms a problem, one by one)."""
+    n = len(patterns)
+    checked = [_start(k, cp, starts[k]) for k, cp in enumerate(patterns)]
+    groups: dict[tuple, list[int]] = {}
+    for k, cp in enumerate(patterns):
+        mesh = cp.mesh
+        arrays = (mesh.triangles, mesh.edges, mesh.role)
+        groups.setdefault((mesh.num_vertices, *(a.tobytes() for a in arrays)), []).append(k)
+    shared: list = [None] * n
+    for ks in groups.values():
+        mesh = patterns[ks[0]].mesh
+        structure = structure_arrays(mesh)
+        flat = np.stack([patterns[k].mesh.vertices for k in ks])
+        start = np.stack([checked[k] for k in ks])
+        pinned, projectors = rigid_gauges(mesh.triangles, flat, start, ks)
+        steps = default_max_steps(mesh.triangles, flat)
+        for j, k in enumerate(ks):
+            shared[k] = (structure, pinned[j], projectors[j], steps[j])
+    members = []
+    for k, cp in enumerate(patterns):
+        structure, pinned, projectors, max_step = shared[k]
+        problem = Problem(
+            structure=structure,
+            params=param_arrays(cp, percents[k], stiffnesses[k]),
+            start=checked[k],
+            pinned=pinned,
+            projectors=projectors,
+            tol=np.asarray(tol),
+            max_step=np.asarray(max_step),
+        )
+        sizes = BatchSizes(
+            cp.mesh.num_vertices,
+            len(structure.bars),
+            structure.num_creases,
+            structure.num_facets,
+            len(structure.free),
+            len(pinned),
+        )
+        members.append(_Member(k, cp, problem, sizes))
+    return members
 
 
 def _topology(member: _Member) -> tuple:
@@ -420,10 +452,7 @@ def fold_batch(
     start_list = [None] * n if starts is None else _per_problem(list(starts), n, "starts")
     devices = list(devices) if devices is not None else jax.devices()
 
-    members = [
-        _member(k, cp, percents[k], stiffnesses[k], start_list[k], tol, dtype)
-        for k, cp in enumerate(patterns)
-    ]
+    members = _members(patterns, percents, stiffnesses, start_list, tol)
     topologies = [_topology(m) for m in members]
     count = Counter(topologies)
     # key: (sizes compiled for, topology if shared else None)
@@ -596,22 +625,19 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
     while True:
         now = time.perf_counter() - t0
         status, iteration = samples[-1][0]["status"], samples[-1][0]["iteration"]
-        stopped = [
-            b
-            for b, member in enumerate(slots)
-            if member is not None
-            and (
-                status[b] != Status.RUNNING
-                or iteration[b] >= max_iter
-                or (max_time is not None and now - entered[b] >= max_time)
-            )
-        ]
+        occupied = np.array([member is not None for member in slots])
+        going = (status == int(Status.RUNNING)) & (iteration < max_iter)
+        if max_time is not None:
+            going &= now - entered < max_time
+        stopped = np.flatnonzero(occupied & ~going).tolist()
         if stopped:
             host_out = jax.device_get((state, m, x, angles))
+            table, counts = _history_table(samples, size)
             done = []
             for b in stopped:
                 out_of_time = status[b] == Status.RUNNING and iteration[b] < max_iter
-                history = [s for s, entry in samples[since[b] :] if entry is None or entry[b]]
+                rows = since[b] + np.flatnonzero(counts[since[b] :, b])
+                history = {k: v[rows, b] for k, v in table.items()}
                 result = _result(
                     slots[b], b, to, *host_out, history, entered[b], out_of_time, solver,
                     dtype, now - entered[b], compile_time,
@@ -659,10 +685,21 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
         chunk = next_chunk(chunk, t_done - t_chunk, steps)
 
 
+def _history_table(samples: list, size: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The samples' history fields as (S, size) arrays, and (S, size) whether each sample counts
+    for each slot (a refill's sample counts only for the slots refilled)."""
+    table = {
+        k: np.stack([np.broadcast_to(np.asarray(s[k], np.float64), size) for s, _ in samples])
+        for k in HISTORY_FIELDS
+    }
+    counts = np.stack([np.ones(size, bool) if e is None else e for _, e in samples])
+    return table, counts
+
+
 def _result(
-    member, b, to, state, m, x, angles, samples, entered, out_of_time, solver, dtype, wall, comp
+    member, b, to, state, m, x, angles, history, entered, out_of_time, solver, dtype, wall, comp
 ):
-    """Slot ``b``'s result, unpadded; ``samples`` from its first (taken when it ``entered``)."""
+    """Slot ``b``'s result, unpadded; ``history`` its samples' fields since it ``entered``."""
     s = member.sizes
     status = Status(int(state.status[b]))
     if status == Status.RUNNING:
@@ -673,8 +710,7 @@ def _result(
     metrics["fold_angle_error_mean"] *= to.creases / s.creases if s.creases else 0.0
     iterations = int(state.iteration[b])
     tol = float(member.problem.tol)
-    history = history_of(samples, b)
-    history["wall_time"] = history["wall_time"] - entered
+    history = {**history, "wall_time": history["wall_time"] - entered}
     return FoldResult(
         pattern=member.pattern,
         positions=np.asarray(x[b, : s.vertices], np.float64),

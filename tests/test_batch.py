@@ -18,7 +18,13 @@ from origami_jax.energy import energy
 from origami_jax.fold import drive
 from origami_jax.geometry import bar_lengths, fold_angles
 from origami_jax.solvers import Newton, Status
-from origami_jax.solvers.base import positions
+from origami_jax.solvers.base import (
+    default_max_step,
+    default_max_steps,
+    positions,
+    rigid_gauge,
+    rigid_gauges,
+)
 
 jax.config.update("jax_enable_x64", True)
 
@@ -103,7 +109,7 @@ def test_which_problems_share_their_topology(monkeypatch):
 
 
 def _padded_problem(cp, grow: int):
-    member = batch_module._member(0, cp, 0.7, None, None, 1e-10, jnp.float64)
+    (member,) = batch_module._members([cp], [0.7], [None], [None], 1e-10)
     to = bucket(member.sizes)
     bigger = BatchSizes(*(2 * v if v else 0 for v in to))
     bigger = bigger._replace(creases=bigger.creases or 4, facets=bigger.facets or 4)
@@ -240,6 +246,30 @@ def test_bad_input():
         fold_batch(MIURAS[:2], starts=[None, bad])
     with pytest.raises(ValueError, match="dense"):
         fold_batch(MIURAS[:1], solver=Newton(linear_solver="sparse"))
+    flat = MIURAS[0].mesh.vertices.copy()
+    flat[:, 1] = 0.0  # every triangle collapsed onto a line
+    with pytest.raises(PatternError, match="start 2: every triangle .* is collapsed"):
+        fold_batch(MIURAS, starts=[None, None, flat])
+
+
+def test_gauges_of_one_topology_at_once_equal_one_by_one():
+    # Miura-ori of other sector angles: one topology, other geometry; folded starts
+    cps = [patterns.miura_ori(3, 2, sector_angle=a, fold_angle=1.0) for a in (0.9, 1.1, 1.3)]
+    rng = np.random.default_rng(3)
+    starts = [cp.mesh.vertices + 0.1 * rng.standard_normal(cp.mesh.vertices.shape) for cp in cps]
+    tris = cps[0].mesh.triangles
+    flat = np.stack([cp.mesh.vertices for cp in cps])
+    pinned, projectors = rigid_gauges(tris, flat, np.stack(starts))
+    steps = default_max_steps(tris, flat)
+    for k, cp in enumerate(cps):
+        one_pinned, one_projectors = rigid_gauge(cp.mesh, starts[k])
+        np.testing.assert_array_equal(pinned[k], one_pinned)
+        np.testing.assert_allclose(projectors[k], one_projectors, rtol=0, atol=1e-15)
+        assert steps[k] == default_max_step(cp.mesh)
+    # the gauge removes the rigid motions: fixed vertex, a line, a plane
+    assert pinned.shape == (3, 3) and np.allclose(projectors[:, 0], 0.0)
+    assert np.allclose(np.trace(projectors[:, 1], axis1=1, axis2=2), 1.0)
+    assert np.allclose(np.trace(projectors[:, 2], axis1=1, axis2=2), 2.0)
 
 
 SHARDED = textwrap.dedent(

@@ -169,9 +169,9 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def doubled_areas(p: np.ndarray) -> np.ndarray:
-    """(T,) twice the area of triangles ``p`` (T, 3, 3) (host side)."""
-    n = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    return np.sqrt(np.sum(n * n, axis=1))
+    """(..., T) twice the area of triangles ``p`` (..., T, 3, 3) (host side)."""
+    n = _cross(p[..., 1, :] - p[..., 0, :], p[..., 2, :] - p[..., 0, :])
+    return np.sqrt(np.sum(n * n, axis=-1))
 
 
 def _triangle_pieces(tris: np.ndarray, num_vertices: int) -> np.ndarray:
@@ -189,29 +189,48 @@ def _triangle_pieces(tris: np.ndarray, num_vertices: int) -> np.ndarray:
 
 def rigid_gauge(mesh: Mesh, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per connected piece, pin the triangle nearest its centroid: vertex a fixed, b on the line
-    ab, c in the plane abc. That removes exactly the 6 rigid motions and nothing else."""
-    tris = mesh.triangles
-    piece_of_tri = _triangle_pieces(tris, mesh.num_vertices)
-    p = start[tris]
-    usable = doubled_areas(p) > 1e-6 * doubled_areas(mesh.vertices[tris])
+    ab, c in the plane abc. That removes exactly the 6 rigid motions and nothing else.
+
+    Returns (3 P,) pinned vertices and their (3 P, 3, 3) projectors, P pieces."""
+    pinned, projectors = rigid_gauges(mesh.triangles, mesh.vertices[None], np.asarray(start)[None])
+    return pinned[0], projectors[0]
+
+
+def rigid_gauges(
+    triangles: np.ndarray, flat: np.ndarray, start: np.ndarray, names: list | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`rigid_gauge` of M problems of one topology at once (fold_batch's variants of one
+    pattern): ``triangles`` (T, 3), ``flat`` and ``start`` (M, V, 3); returns (M, 3 P) pinned
+    vertices and (M, 3 P, 3, 3) projectors. A problem whose piece has no triangle of nonzero
+    area raises :class:`PatternError` naming ``names[m]`` (default: no name)."""
+    tris = triangles
+    piece_of_tri = _triangle_pieces(tris, flat.shape[1])
+    p = start[:, tris]  # (M, T, 3, 3)
+    usable = doubled_areas(p) > 1e-6 * doubled_areas(flat[:, tris])
+    rows = np.arange(len(start))
     pinned, projectors = [], []
     for piece in np.unique(piece_of_tri):
         members = np.flatnonzero(piece_of_tri == piece)
-        centres = p[members].mean(axis=1)
-        order = members[np.argsort(np.linalg.norm(centres - centres.mean(axis=0), axis=1))]
-        good = order[usable[order]]
-        if len(good) == 0:
+        centres = p[:, members].mean(axis=2)  # (M, Tp, 3)
+        far = np.linalg.norm(centres - centres.mean(axis=1, keepdims=True), axis=2)
+        order = members[np.argsort(far, axis=1)]  # (M, Tp) nearest first
+        good = usable[rows[:, None], order]
+        bad = ~good.any(axis=1)
+        if bad.any():
+            name = "" if names is None else f" {names[int(np.flatnonzero(bad)[0])]}"
             raise PatternError(
-                f"start: every triangle of the piece holding vertex {tris[members[0], 0]} "
+                f"start{name}: every triangle of the piece holding vertex {tris[members[0], 0]} "
                 "is collapsed (zero area)"
             )
-        a, b, c = tris[good[0]]
-        d = start[b] - start[a]
-        n = _cross(d, start[c] - start[a])
-        d, n = d / np.sqrt(d @ d), n / np.sqrt(n @ n)
+        a, b, c = tris[order[rows, np.argmax(good, axis=1)]].T  # (M,) each
+        d = start[rows, b] - start[rows, a]
+        n = _cross(d, start[rows, c] - start[rows, a])
+        d = d / np.sqrt(np.sum(d * d, axis=1, keepdims=True))
+        n = n / np.sqrt(np.sum(n * n, axis=1, keepdims=True))
+        outer = lambda u: u[:, :, None] * u[:, None, :]  # noqa: E731
         pinned += [a, b, c]
-        projectors += [np.zeros((3, 3)), np.outer(d, d), np.eye(3) - np.outer(n, n)]
-    return np.array(pinned, np.int32), np.array(projectors)
+        projectors += [np.zeros((len(rows), 3, 3)), outer(d), np.eye(3) - outer(n)]
+    return np.stack(pinned, axis=1).astype(np.int32), np.stack(projectors, axis=1)
 
 
 def make_problem(
@@ -238,10 +257,15 @@ def make_problem(
 
 def default_max_step(mesh: Mesh) -> float:
     """Half the median altitude of the triangles: a step turns a typical hinge < ~30 deg."""
-    p = mesh.vertices[mesh.triangles]
-    edges = p - p[:, [2, 0, 1]]
-    longest = np.sqrt(np.max(np.sum(edges * edges, axis=2), axis=1))
-    return float(0.5 * np.median(doubled_areas(p) / longest))
+    return float(default_max_steps(mesh.triangles, mesh.vertices[None])[0])
+
+
+def default_max_steps(triangles: np.ndarray, flat: np.ndarray) -> np.ndarray:
+    """(M,) :func:`default_max_step` of M meshes of one topology, vertices ``flat`` (M, V, 3)."""
+    p = flat[:, triangles]
+    edges = p - p[:, :, [2, 0, 1]]
+    longest = np.sqrt(np.max(np.sum(edges * edges, axis=3), axis=2))
+    return 0.5 * np.median(doubled_areas(p) / longest, axis=1)
 
 
 def gauge(problem: Problem, u: Array) -> Array:
