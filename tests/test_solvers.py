@@ -260,6 +260,12 @@ def test_block_sparse_solve_matches_dense():
             [np.asarray(structure.bars), np.asarray(structure.hinges)], mesh.num_vertices
         ),
     )
+    # the elimination runs in consecutive segments, each padded to its own widest step
+    cuts = plan.segments
+    assert cuts[0][0] == 0 and cuts[-1][1] == mesh.num_vertices and len(cuts) > 1
+    assert all(a[1] == b[0] for a, b in zip(cuts, cuts[1:], strict=False))
+    widest = max(p.shape[1] for p in plan.pair_a)
+    assert sum(p.size for p in plan.pair_a) < mesh.num_vertices * widest
     rng = np.random.default_rng(0)
     base = rigid_fold(cp, 0.5 * mesh.target)
     xs = jnp.asarray(base + 0.02 * rng.standard_normal((3, *base.shape)))
