@@ -515,7 +515,7 @@ def _stack(*trees):
 
 def _host_problem(problems: list[Problem], axes, dtype) -> Problem:
     """The slots' problems stacked along the batch axis (leaves of axis None taken once),
-    floats in ``dtype``: NumPy arrays whose rows :func:`_set_row` replaces."""
+    floats in ``dtype``: NumPy arrays whose rows :func:`_set_rows` replaces."""
     stacked = jax.tree.map(
         lambda a, *rest: rest[0] if a is None else _stack(*rest),
         axes,
@@ -536,14 +536,14 @@ def _host_problem(problems: list[Problem], axes, dtype) -> Problem:
     )
 
 
-def _set_row(host: Problem, axes, row: int, problem: Problem) -> None:
-    """Put ``problem`` into slot ``row`` of the stacked ``host`` problem (batched leaves)."""
+def _set_rows(host: Problem, axes, rows: list[int], problems: list[Problem]) -> None:
+    """Put ``problems`` into slots ``rows`` of the stacked ``host`` problem (batched leaves)."""
 
-    def put(a, stacked, value):
+    def put(a, stacked, *values):
         if a is not None:
-            jax.tree.map(lambda s, v: s.__setitem__(row, v), stacked, value)
+            jax.tree.map(lambda s, *v: s.__setitem__(rows, np.stack(v)), stacked, *values)
 
-    jax.tree.map(put, axes, host, problem, is_leaf=lambda a: a is None)
+    jax.tree.map(put, axes, host, *problems, is_leaf=lambda a: a is None)
 
 
 def _to_devices(tree, axes, devices):
@@ -657,7 +657,7 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
             free = free[len(refill) :]
             for b in refill:
                 slots[b] = queue.popleft()
-                _set_row(host, axes, b, prepared(slots[b]))
+            _set_rows(host, axes, refill, [prepared(slots[b]) for b in refill])
             problem = _to_devices(host, axes, devices)
             fresh = start(problem)
             check_start(solver, fresh[0])
