@@ -401,11 +401,7 @@ def _sample(state, m, t: float) -> dict:
     return out
 
 
-def history_of(samples: list[dict], member: int | None = None) -> dict[str, np.ndarray]:
-    """The ``history`` arrays of one solve from the samples of :func:`drive` (``member``: its
-    index in a batch)."""
-
-    def pick(v):
-        return v if member is None or np.ndim(v) == 0 else v[member]
-
-    return {k: np.array([float(pick(s[k])) for s in samples]) for k in HISTORY_FIELDS}
+def history_of(samples: list[dict]) -> dict[str, np.ndarray]:
+    """The ``history`` arrays of one solve from the samples of :func:`drive` (a batch's come
+    from ``origami_jax.batch._history_table``)."""
+    return {k: np.array([float(s[k]) for s in samples]) for k in HISTORY_FIELDS}
