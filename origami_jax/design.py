@@ -55,6 +55,7 @@ from origami_jax.solvers.base import (
     Problem,
     default_max_step,
     objective,
+    pin_axes,
     positions,
     prepare,
     rigid_gauge,
@@ -231,11 +232,7 @@ class _Static(NamedTuple):
 def _projectors(start: Array, triangles: np.ndarray) -> Array:
     """(3 P, 3, 3) gauge projectors of :func:`~origami_jax.solvers.base.rigid_gauge`, computed
     in JAX from ``start``: a fixed, b on the line ab, c in the plane abc."""
-    a, b, c = (start[triangles[:, k]] for k in range(3))
-    d = b - a
-    d = d / jnp.linalg.norm(d, axis=-1, keepdims=True)
-    n = jnp.cross(b - a, c - a)
-    n = n / jnp.linalg.norm(n, axis=-1, keepdims=True)
+    d, n = pin_axes(*(start[triangles[:, k]] for k in range(3)))
     eye = jnp.eye(3, dtype=start.dtype)
     zero = jnp.zeros_like(eye)
     proj = [
