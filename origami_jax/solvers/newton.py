@@ -717,11 +717,11 @@ class Newton:
         solve = self._factor(s, problem, exact, keep=accelerate)
         x = positions(problem, s.u)
         step, ok = solve(-gauge(problem, s.grad))
-        free, turn = rigid_free(step, x, problem)
+        free, spin = rigid_free(step, x, problem)
         # only a step that turns the sheet by more than ``free_turn`` is taken free (then
         # reframed): reframing moves every vertex, so near a solution it would only add the
         # rounding of a rotation found from one small triangle
-        unpin = turn > self.free_turn
+        unpin = spin > self.free_turn
         step = jnp.where(ok, jnp.where(unpin, free, step), 0.0)
         if accelerate:
             curve = self._acceleration(s, problem, x, step, solve)
