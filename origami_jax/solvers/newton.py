@@ -448,7 +448,7 @@ def _piece_index(problem: Problem, usable: Array) -> tuple[Array, Array]:
     """(V,) each vertex's pinned triangle (clipped) and whether it has a usable one."""
     piece = problem.aux.piece
     k = jnp.clip(piece, 0, usable.shape[0] - 1)
-    return k, (piece >= 0) & usable[k]
+    return k, (piece >= 0) & (piece < usable.shape[0]) & usable[k]
 
 
 def reframe(x: Array, problem: Problem) -> Array:
@@ -467,32 +467,33 @@ def reframe(x: Array, problem: Problem) -> Array:
 def rigid_free(w: Array, x: Array, problem: Problem) -> tuple[Array, Array]:
     """``w`` (V, 3) less its least-squares infinitesimal rigid motion at ``x``, piece by
     piece (the shortest displacement equivalent to ``w`` up to a rigid motion), and the
-    largest rotation removed (radians per unit of ``w``)."""
+    largest rotation removed (radians per unit of ``w``).
+
+    About each piece's centroid the fit splits: the translation is the mean of ``w``, the
+    rotation ``J^-1 sum r x w`` with ``J`` the piece's inertia tensor (3 x 3, inverted in
+    closed form: LAPACK's batched kernels deadlock under several CPU devices)."""
     _, _, usable = _pinned_frames(x, problem)
     k, ok = _piece_index(problem, usable)
     num = usable.shape[0]
     weight = ok.astype(x.dtype)[:, None]
-    count = jax.ops.segment_sum(weight, k, num)
-    centre = jax.ops.segment_sum(weight * x, k, num) / jnp.maximum(count, 1)
-    r = x - centre[k]
-    zero = jnp.zeros_like(r[:, 0])
-    # rotation by omega moves r by omega x r = -[r]_x omega
-    skew = jnp.stack(
-        [
-            jnp.stack([zero, r[:, 2], -r[:, 1]], -1),
-            jnp.stack([-r[:, 2], zero, r[:, 0]], -1),
-            jnp.stack([r[:, 1], -r[:, 0], zero], -1),
-        ],
-        axis=1,
-    )
-    eye = jnp.broadcast_to(jnp.eye(3, dtype=x.dtype), skew.shape)
-    basis = jnp.concatenate([eye, skew], axis=2) * weight[:, :, None]  # (V, 3, 6)
-    normal = jax.ops.segment_sum(jnp.einsum("vij,vik->vjk", basis, basis), k, num)
-    normal = normal + jnp.where(count[:, :, None] > 0, 0.0, jnp.eye(6, dtype=x.dtype))
-    rhs = jax.ops.segment_sum(jnp.einsum("vij,vi->vj", basis, w), k, num)
-    coeff = jnp.linalg.solve(normal, rhs[..., None])[..., 0]
-    turn = jnp.max(jnp.sqrt(jnp.sum(coeff[:, 3:] ** 2, axis=-1)))
-    return w - jnp.einsum("vij,vj->vi", basis, coeff[k]), turn
+    count = jnp.maximum(jax.ops.segment_sum(weight, k, num), 1)
+    centre = jax.ops.segment_sum(weight * x, k, num) / count
+    r = (x - centre[k]) * weight
+    shift = jax.ops.segment_sum(weight * w, k, num) / count
+    moment = jax.ops.segment_sum(jnp.cross(r, w), k, num)
+    outer = jax.ops.segment_sum(r[:, :, None] * r[:, None, :], k, num)
+    inertia = jnp.trace(outer, axis1=1, axis2=2)[:, None, None] * jnp.eye(3, dtype=x.dtype) - outer
+    # inverse by cofactors (the inertia tensor is symmetric): rows are cross products of columns
+    c0, c1, c2 = inertia[:, :, 0], inertia[:, :, 1], inertia[:, :, 2]
+    adjugate = jnp.stack([jnp.cross(c1, c2), jnp.cross(c2, c0), jnp.cross(c0, c1)], axis=1)
+    det = jnp.sum(c0 * jnp.cross(c1, c2), axis=-1)
+    scale = jnp.max(jnp.abs(inertia), axis=(1, 2)) ** 3
+    solid = det > 1e-12 * scale
+    omega = jnp.einsum("kij,kj->ki", adjugate, moment) / jnp.where(solid, det, 1.0)[:, None]
+    omega = jnp.where(solid[:, None], omega, 0.0)
+    spin = jnp.max(jnp.sqrt(jnp.sum(omega * omega, axis=-1)))
+    rigid = shift[k] + jnp.cross(omega[k], r)
+    return w - rigid * weight, spin
 
 
 def _cholesky_solve(matrix: Array, rhs: Array) -> Array:
