@@ -435,3 +435,29 @@ def test_reframe_and_rigid_free_piece_by_piece():
     np.testing.assert_allclose(
         result.positions[pinned[0::3]], mesh.vertices[pinned[0::3]], atol=1e-12
     )
+
+
+def test_sparse_newton_in_float32_without_x64():
+    """JAX's default (no x64): the sparse host solve's callback returns no 64-bit value (its
+    factorization token was int64, which failed every sparse float32 solve before stop 20)."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import jax, jax.numpy as jnp\n"
+        "assert not jax.config.jax_enable_x64\n"
+        "from origami_jax import fold, patterns\n"
+        "from origami_jax.solvers import Newton\n"
+        "r = fold(patterns.miura_ori(3, 3), solver=Newton(linear_solver='sparse'), "
+        "dtype=jnp.float32)\n"
+        "assert r.converged and r.dtype == 'float32', r.reason\n"
+        "assert r.fold_angle_error_max < 1e-4, r.fold_angle_error_max\n"
+        "print('ok', r.iterations)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.startswith("ok")

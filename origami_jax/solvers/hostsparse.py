@@ -166,18 +166,18 @@ def factor_solve(indptr, indices, data, rhs, keep: bool = False):
 def _factor_solve(indptr, indices, data, rhs, keep):
     found = _factor(indptr, indices, data)
     if found is None:
-        return np.zeros_like(rhs), np.asarray(False), np.asarray(0, np.int64)
+        return np.zeros_like(rhs), np.asarray(False), np.asarray(0, np.int32)
     solve_fn, release = found
     x, ok = _finish(solve_fn(rhs), rhs)
     token = 0
     if keep and ok:
-        token = next(_TOKENS)
+        token = next(_TOKENS) % (2**31 - 1) + 1  # int32: JAX without x64 has no int64
         _KEPT[token] = found
         while len(_KEPT) > _KEPT_MAX:
             _KEPT.popitem(last=False)[1][1]()
     else:
         release()
-    return x, np.asarray(ok), np.asarray(token, np.int64)
+    return x, np.asarray(ok), np.asarray(token, np.int32)
 
 
 def resolve(token, rhs):

@@ -685,7 +685,7 @@ class Newton:
                     (
                         jax.ShapeDtypeStruct(b.shape, b.dtype),
                         jax.ShapeDtypeStruct((), jnp.bool_),
-                        jax.ShapeDtypeStruct((), jnp.int64),
+                        jax.ShapeDtypeStruct((), jnp.int32),
                     ),
                     layout.indptr,
                     layout.indices,
