@@ -271,11 +271,10 @@ def default_max_steps(triangles: np.ndarray, flat: np.ndarray) -> np.ndarray:
 def pin_axes(a: Array, b: Array, c: Array) -> tuple[Array, Array]:
     """Unit vectors along ``ab`` and normal to the plane ``abc`` of triangles (..., 3) each:
     the two axes of the rigid gauge. A degenerate triangle gives zeros, not NaN."""
-    tiny = jnp.finfo(jnp.result_type(a)).tiny
 
     def unit(w):
         norm = jnp.sqrt(jnp.sum(w * w, axis=-1, keepdims=True))
-        return w / jnp.maximum(norm, tiny)
+        return jnp.where(norm > 0, w / jnp.where(norm > 0, norm, 1), 0)
 
     return unit(b - a), unit(jnp.cross(b - a, c - a))
 

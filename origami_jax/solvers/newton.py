@@ -457,7 +457,8 @@ def reframe(x: Array, problem: Problem) -> Array:
     the displacement ``x - start`` then satisfies the gauge exactly, so :func:`positions`
     gives ``x`` back."""
     frame, a, usable = _pinned_frames(x, problem)
-    frame0, a0, _ = _pinned_frames(problem.start, problem)
+    frame0, a0, usable0 = _pinned_frames(problem.start, problem)
+    usable = usable & usable0  # a start that collapses a pinned triangle has no frame to keep
     rotation = jnp.einsum("kji,kjl->kil", frame0, frame)  # frame0^T frame
     k, ok = _piece_index(problem, usable)
     moved = jnp.einsum("vij,vj->vi", rotation[k], x - a[k]) + a0[k]
@@ -717,7 +718,10 @@ class Newton:
         accelerate = self.acceleration > 0
         solve = self._factor(s, problem, exact, keep=accelerate)
         x = positions(problem, s.u)
+        # gauged again: the Levenberg-Marquardt shift does not commute with the projectors, and
+        # the line search below evaluates exactly the positions it keeps
         step, ok = solve(-gauge(problem, s.grad))
+        step = gauge(problem, step)
         free, spin = rigid_free(step, x, problem)
         # only a step that turns the sheet by more than ``free_turn`` is taken free (then
         # reframed): reframing moves every vertex, so near a solution it would only add the
@@ -725,7 +729,7 @@ class Newton:
         unpin = spin > self.free_turn
         step = jnp.where(ok, jnp.where(unpin, free, step), 0.0)
         if accelerate:
-            curve = self._acceleration(s, problem, x, step, solve)
+            curve = gauge(problem, self._acceleration(s, problem, x, step, solve))
             curve = jnp.where(unpin, rigid_free(curve, x, problem)[0], curve)
             curve = jnp.where(ok, curve, 0.0)
         else:
