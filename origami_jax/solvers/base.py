@@ -174,16 +174,17 @@ def doubled_areas(p: np.ndarray) -> np.ndarray:
     return np.sqrt(np.sum(n * n, axis=-1))
 
 
-def _triangle_pieces(tris: np.ndarray, num_vertices: int) -> np.ndarray:
-    """(T,) the connected piece of each triangle, named by its lowest vertex: labels spread
-    by minimum over triangles, with pointer jumping (vectorized; no graph object to build)."""
+def piece_labels(elements: np.ndarray, num_vertices: int) -> np.ndarray:
+    """(V,) the connected piece of each vertex over ``elements`` (n, k) (triangles, bars),
+    named by its lowest vertex (a vertex in no element is its own piece): labels spread by
+    minimum over elements, with pointer jumping (vectorized; no graph object to build)."""
     label = np.arange(num_vertices)
     while True:
         new = label.copy()
-        np.minimum.at(new, tris, label[tris].min(axis=1)[:, None])
+        np.minimum.at(new, elements, label[elements].min(axis=1)[:, None])
         new = new[new]
         if np.array_equal(new, label):
-            return label[tris[:, 0]]
+            return label
         label = new
 
 
@@ -204,7 +205,7 @@ def rigid_gauges(
     vertices and (M, 3 P, 3, 3) projectors. A problem whose piece has no triangle of nonzero
     area raises :class:`PatternError` naming ``names[m]`` (default: no name)."""
     tris = triangles
-    piece_of_tri = _triangle_pieces(tris, flat.shape[1])
+    piece_of_tri = piece_labels(tris, flat.shape[1])[tris[:, 0]]
     p = start[:, tris]  # (M, T, 3, 3)
     usable = doubled_areas(p) > 1e-6 * doubled_areas(flat[:, tris])
     rows = np.arange(len(start))

@@ -54,7 +54,6 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 from jax import Array
-from scipy.sparse import csgraph
 
 from origami_jax.energy import Structure, energy, hinge_goals, initial_reference, residuals
 from origami_jax.geometry import (
@@ -73,6 +72,7 @@ from origami_jax.solvers.base import (
     gauge,
     has_converged,
     next_status,
+    piece_labels,
     pin_axes,
     positions,
     run_steps,
@@ -216,18 +216,13 @@ def _vertex_pieces(bars: np.ndarray, num_vertices: int) -> np.ndarray:
     """(V,) the connected piece of each vertex over the bars, pieces ranked by their lowest
     vertex (the order of :func:`~origami_jax.solvers.base.rigid_gauges`); -1 off every bar
     (padding vertices of a batch form pieces past the pinned ones, which the gauge ignores)."""
-    adjacency = sp.csr_matrix(
-        (np.ones(len(bars)), (bars[:, 0], bars[:, 1])), shape=(num_vertices, num_vertices)
-    )
-    count, label = csgraph.connected_components(adjacency, directed=False)
-    lowest = np.full(count, num_vertices)
-    np.minimum.at(lowest, label, np.arange(num_vertices))
-    used = np.zeros(count, bool)
-    used[label[bars.ravel()]] = True
-    rank = np.full(count, -1)
-    kept = np.flatnonzero(used)
-    rank[kept[np.argsort(lowest[kept])]] = np.arange(len(kept))
-    return rank[label].astype(np.int32)
+    label = piece_labels(bars, num_vertices)
+    on_bar = np.zeros(num_vertices, bool)
+    on_bar[bars.ravel()] = True
+    _, rank = np.unique(label[on_bar], return_inverse=True)  # sorted: by lowest vertex
+    out = np.full(num_vertices, -1, np.int32)
+    out[on_bar] = rank
+    return out
 
 
 def layout_arrays(
@@ -468,7 +463,14 @@ def reframe(x: Array, problem: Problem) -> Array:
 def rigid_free(w: Array, x: Array, problem: Problem) -> tuple[Array, Array]:
     """``w`` (V, 3) less its least-squares infinitesimal rigid motion at ``x``, piece by
     piece (the shortest displacement equivalent to ``w`` up to a rigid motion), and the
-    largest rotation removed (radians per unit of ``w``).
+    largest rotation removed (radians per unit of ``w``). :func:`rigid_fit` once for several
+    ``w`` at the same ``x``."""
+    return rigid_fit(x, problem)(w)
+
+
+def rigid_fit(x: Array, problem: Problem):
+    """:func:`rigid_free` at ``x`` as a function of ``w``, the pieces' centroids and inertia
+    tensors computed once.
 
     About each piece's centroid the fit splits: the translation is the mean of ``w``, the
     rotation ``J^-1 sum r x w`` with ``J`` the piece's inertia tensor (3 x 3, inverted in
@@ -480,21 +482,24 @@ def rigid_free(w: Array, x: Array, problem: Problem) -> tuple[Array, Array]:
     count = jnp.maximum(jax.ops.segment_sum(weight, k, num), 1)
     centre = jax.ops.segment_sum(weight * x, k, num) / count
     r = (x - centre[k]) * weight
-    shift = jax.ops.segment_sum(weight * w, k, num) / count
-    moment = jax.ops.segment_sum(jnp.cross(r, w), k, num)
     outer = jax.ops.segment_sum(r[:, :, None] * r[:, None, :], k, num)
     inertia = jnp.trace(outer, axis1=1, axis2=2)[:, None, None] * jnp.eye(3, dtype=x.dtype) - outer
     # inverse by cofactors (the inertia tensor is symmetric): rows are cross products of columns
     c0, c1, c2 = inertia[:, :, 0], inertia[:, :, 1], inertia[:, :, 2]
     adjugate = jnp.stack([jnp.cross(c1, c2), jnp.cross(c2, c0), jnp.cross(c0, c1)], axis=1)
     det = jnp.sum(c0 * jnp.cross(c1, c2), axis=-1)
-    scale = jnp.max(jnp.abs(inertia), axis=(1, 2)) ** 3
-    solid = det > 1e-12 * scale
-    omega = jnp.einsum("kij,kj->ki", adjugate, moment) / jnp.where(solid, det, 1.0)[:, None]
-    omega = jnp.where(solid[:, None], omega, 0.0)
-    spin = jnp.max(jnp.sqrt(jnp.sum(omega * omega, axis=-1)))
-    rigid = shift[k] + jnp.cross(omega[k], r)
-    return w - rigid * weight, spin
+    solid = det > 1e-12 * jnp.max(jnp.abs(inertia), axis=(1, 2)) ** 3
+    inverse = (
+        jnp.where(solid[:, None, None], adjugate, 0.0) / jnp.where(solid, det, 1.0)[:, None, None]
+    )
+
+    def remove(w: Array) -> tuple[Array, Array]:
+        shift = jax.ops.segment_sum(weight * w, k, num) / count
+        omega = jnp.einsum("kij,kj->ki", inverse, jax.ops.segment_sum(jnp.cross(r, w), k, num))
+        spin = jnp.max(jnp.sqrt(jnp.sum(omega * omega, axis=-1)))
+        return w - (shift[k] + jnp.cross(omega[k], r)) * weight, spin
+
+    return remove
 
 
 def _cholesky_solve(matrix: Array, rhs: Array) -> Array:
@@ -722,7 +727,8 @@ class Newton:
         # the line search below evaluates exactly the positions it keeps
         step, ok = solve(-gauge(problem, s.grad))
         step = gauge(problem, step)
-        free, spin = rigid_free(step, x, problem)
+        remove_rigid = rigid_fit(x, problem)
+        free, spin = remove_rigid(step)
         # only a step that turns the sheet by more than ``free_turn`` is taken free (then
         # reframed): reframing moves every vertex, so near a solution it would only add the
         # rounding of a rotation found from one small triangle
@@ -730,7 +736,7 @@ class Newton:
         step = jnp.where(ok, jnp.where(unpin, free, step), 0.0)
         if accelerate:
             curve = gauge(problem, self._acceleration(s, problem, x, step, solve))
-            curve = jnp.where(unpin, rigid_free(curve, x, problem)[0], curve)
+            curve = jnp.where(unpin, remove_rigid(curve)[0], curve)
             curve = jnp.where(ok, curve, 0.0)
         else:
             curve = jnp.zeros_like(step)
