@@ -711,13 +711,14 @@ def _result(
     iterations = int(state.iteration[b])
     tol = float(member.problem.tol)
     history = {**history, "wall_time": history["wall_time"] - entered}
+    positions = np.asarray(x[b, : s.vertices], np.float64)
     return FoldResult(
         pattern=member.pattern,
-        positions=np.asarray(x[b, : s.vertices], np.float64),
+        positions=positions,
         fold_angles=np.asarray(angles[b, : s.bars], np.float64),
         converged=status == Status.CONVERGED,
         status=status,
-        reason=_reason(status, metrics, tol, iterations),
+        reason=_reason(status, metrics, tol, iterations, positions, member.pattern.mesh),
         iterations=iterations,
         solver=solver.name,
         percent=float(member.problem.params.percent),

@@ -16,7 +16,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from origami_jax.energy import FoldParams, Stiffness, make_params, make_structure
-from origami_jax.metrics import METRIC_NAMES, edge_fold_angles, position_metrics, shape_error
+from origami_jax.metrics import (
+    METRIC_NAMES,
+    collapse_note,
+    collapsed_triangles,
+    edge_fold_angles,
+    position_metrics,
+    shape_error,
+)
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
 from origami_jax.solvers import Solver, Status, get_solver
@@ -91,6 +98,12 @@ class FoldResult:
         return np.flatnonzero(np.abs(self.fold_angles) > np.pi + 1e-9)
 
     @property
+    def collapsed(self) -> np.ndarray:
+        """Mesh triangles squeezed below 1e-6 of their flat area, the smallest first (see
+        :func:`~origami_jax.metrics.collapsed_triangles`). Empty for a physical result."""
+        return collapsed_triangles(self.positions, self.pattern.mesh)[0]
+
+    @property
     def metrics(self) -> dict[str, float]:
         """The metrics of metrics.md by name (shape_error only when a reference was given)."""
         out = {name: getattr(self, name) for name in METRIC_NAMES}
@@ -122,10 +135,14 @@ class FoldResult:
         ]
         if self.shape_error is not None:
             rows.append(("shape error", f"{self.shape_error:.3e}"))
-        through = self.through_pi
-        if len(through):
-            shown = ", ".join(str(k) for k in through[:8]) + (" ..." if len(through) > 8 else "")
-            rows.append(("folded through pi", f"{len(through)} edges: {shown}"))
+        flagged = (
+            ("folded through pi", "edges", self.through_pi),
+            ("collapsed", "triangles", self.collapsed),
+        )
+        for label, kind, found in flagged:
+            if len(found):
+                shown = ", ".join(str(k) for k in found[:8]) + (" ..." if len(found) > 8 else "")
+                rows.append((label, f"{len(found)} {kind}: {shown}"))
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
@@ -243,8 +260,11 @@ def drive(solver, start, advance, problem, max_iter: int, max_time, record_every
     return state, m, x, angles, samples, out_of_time
 
 
-def _reason(status: Status, m: dict, tol: float, iterations: int) -> str:
+def _reason(status: Status, m: dict, tol: float, iterations: int, x: np.ndarray, mesh) -> str:
+    """Why the solve stopped; a solve that did not converge also names the worst collapsed
+    triangle of its result (``x``), if any."""
     g = m["grad_norm_rel"]
+    note = collapse_note(x, mesh) if status != Status.CONVERGED else ""
     return {
         Status.CONVERGED: f"converged: grad_norm_rel {g:.2e} <= tol {tol:.1e}"
         if g <= tol
@@ -259,7 +279,7 @@ def _reason(status: Status, m: dict, tol: float, iterations: int) -> str:
         Status.STALLED: f"stalled at grad_norm_rel {g:.2e} > tol {tol:.1e}: the line search "
         "finds no decrease (the rounding floor of this dtype, or a kink such as a collapsed "
         "triangle)",
-    }[status]
+    }[status] + (f"; {note}" if note else "")
 
 
 def fold(
@@ -377,7 +397,7 @@ def fold(
         fold_angles=np.asarray(angles, np.float64),
         converged=status == Status.CONVERGED,
         status=status,
-        reason=_reason(status, m, tol, iterations),
+        reason=_reason(status, m, tol, iterations, x, pattern.mesh),
         iterations=int(state.iteration),
         solver=solver_obj.name,
         percent=float(percent),

@@ -8,6 +8,9 @@
 * ``grad_norm_rel``: max-abs energy gradient divided by its value at the start of the solve;
 * ``shape_error``: RMS vertex distance after optimal rigid alignment (Kabsch) divided by the
   flat sheet's diameter.
+
+Not a metric of metrics.md but reported with them: :func:`collapsed_triangles`, the triangles
+a result has squeezed to (nearly) zero area.
 """
 
 from __future__ import annotations
@@ -18,8 +21,17 @@ from jax import Array
 
 from origami_jax.energy import FoldParams, Structure, energy, hinge_goals
 from origami_jax.geometry import bar_lengths, fold_angles
+from origami_jax.pattern import Mesh
+from origami_jax.solvers.base import COLLAPSED_AREA, doubled_areas
 
-__all__ = ["position_metrics", "edge_fold_angles", "kabsch_align", "shape_error", "METRIC_NAMES"]
+__all__ = [
+    "position_metrics",
+    "edge_fold_angles",
+    "kabsch_align",
+    "shape_error",
+    "collapsed_triangles",
+    "METRIC_NAMES",
+]
 
 METRIC_NAMES = (
     "fold_angle_error_max",
@@ -77,3 +89,37 @@ def shape_error(x: np.ndarray, reference: np.ndarray, diameter: float) -> float:
     """RMS vertex distance after optimal rigid alignment (Kabsch), divided by ``diameter``."""
     aligned = kabsch_align(x, reference)
     return float(np.sqrt(np.mean(np.sum((aligned - reference) ** 2, axis=1))) / diameter)
+
+
+def collapsed_triangles(x: np.ndarray, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles of ``mesh`` whose area at positions ``x`` (V, 3) is below ``COLLAPSED_AREA``
+    (1e-6) of their flat area: their indices, the smallest area ratio first, and those ratios.
+
+    The bars resist a collapse only by the strain of the triangle's sides, small for a thin
+    triangle (its apex reaches the long side at a strain of about half its altitude-to-side
+    ratio squared), and a collapsed triangle has no normal: the fold angles of its hinges, and
+    so the energy's slope, jump there, and a solver that reaches one stalls on the kink."""
+    tris = np.asarray(mesh.triangles)
+    flat = doubled_areas(np.asarray(mesh.vertices, np.float64)[tris])
+    ratio = doubled_areas(np.asarray(x, np.float64)[tris]) / flat
+    found = np.flatnonzero(~(ratio >= COLLAPSED_AREA))
+    found = found[np.argsort(ratio[found], kind="stable")]
+    return found, ratio[found]
+
+
+def collapse_note(x: np.ndarray, mesh: Mesh) -> str:
+    """``""``, or a sentence naming the worst collapsed triangle of ``x`` and the remedy."""
+    found, ratio = collapsed_triangles(x, mesh)
+    if not len(found):
+        return ""
+    t = int(found[0])
+    p = np.asarray(mesh.vertices, np.float64)[mesh.triangles[t]]
+    sides = np.linalg.norm(p - np.roll(p, 1, axis=0), axis=1)
+    aspect = doubled_areas(p[None])[0] / np.max(sides) ** 2  # altitude over longest side
+    more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
+    return (
+        f"triangle {t} (vertices {', '.join(str(int(v)) for v in mesh.triangles[t])}) collapsed "
+        f"to {ratio[0]:.1e} of its flat area{more}; its altitude is {aspect:.2g} of its "
+        "longest side. Bars resist a collapse only by the strain of the triangle's sides, "
+        "small for a thin triangle: a larger axial stiffness keeps it open"
+    )

@@ -189,6 +189,35 @@ def test_collapsed_start_is_refused_and_partial_collapse_recovers():
     assert result.strain_max < 1e-6 or not result.converged
 
 
+def test_a_result_with_a_collapsed_triangle_names_it():
+    """A solve that stops on a collapsed triangle (the energy's kink) says which one, in
+    ``reason``, ``collapsed`` and the summary; single folds and batches alike."""
+    from origami_jax.batch import fold_batch
+    from origami_jax.metrics import collapsed_triangles
+
+    cp = patterns.single_crease()
+    start = cp.mesh.vertices.copy()
+    start[start[:, 0] > 0.75, 0] = 0.5  # one wing squashed onto the crease line
+    tris = cp.mesh.triangles
+    p = start[tris]
+    area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    squashed = np.flatnonzero(area < 1e-12)
+    assert 0 < len(squashed) < len(tris)
+    found, ratio = collapsed_triangles(start, cp.mesh)
+    assert sorted(found) == sorted(squashed) and np.all(np.diff(ratio) >= 0)
+    stopped = [fold(cp, start=start, max_iter=0)]
+    stopped += fold_batch([cp], starts=[start], max_iter=0, progress=False)
+    for r in stopped:
+        assert not r.converged and sorted(r.collapsed) == sorted(squashed)
+        t = r.collapsed[0]
+        vertices = ", ".join(str(v) for v in tris[t])
+        assert f"triangle {t} (vertices {vertices}) collapsed to" in r.reason
+        assert "larger axial stiffness" in r.reason and "collapsed" in r.summary()
+    done = fold(cp, start=start)  # the squashed wing unfolds: nothing to report
+    assert done.converged and len(done.collapsed) == 0
+    assert "collapsed to" not in done.reason and "collapsed" not in done.summary()
+
+
 def test_time_limit_and_history_times_count_the_chunks_run_not_their_dispatch():
     """``drive`` times each chunk once it has run (JAX dispatch returns at once): a solve
     stops near ``max_time`` and its history's times are completion times."""

@@ -168,6 +168,11 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., i] * b[..., j] - a[..., j] * b[..., i]
 
 
+# a triangle whose area falls below this fraction of its flat area counts as collapsed: it has
+# no normal, so the fold angles of its hinges (and the energy's slope) jump there
+COLLAPSED_AREA = 1e-6
+
+
 def doubled_areas(p: np.ndarray) -> np.ndarray:
     """(..., T) twice the area of triangles ``p`` (..., T, 3, 3) (host side)."""
     n = _cross(p[..., 1, :] - p[..., 0, :], p[..., 2, :] - p[..., 0, :])
@@ -207,7 +212,7 @@ def rigid_gauges(
     tris = triangles
     piece_of_tri = piece_labels(tris, flat.shape[1])[tris[:, 0]]
     p = start[:, tris]  # (M, T, 3, 3)
-    usable = doubled_areas(p) > 1e-6 * doubled_areas(flat[:, tris])
+    usable = doubled_areas(p) > COLLAPSED_AREA * doubled_areas(flat[:, tris])
     rows = np.arange(len(start))
     pinned, projectors = [], []
     for piece in np.unique(piece_of_tri):
