@@ -90,13 +90,17 @@ def test_origami_simulator_miura_ori_matches_its_converged_result():
 
 def test_a_triangle_that_collapses_is_named_and_stiffer_bars_keep_it_open():
     """Origami Simulator's triangulations.svg at our default stiffnesses: its thinner
-    triangles can collapse, and a solve stuck on that kink says which triangle; with bars 10x
-    stiffer (axial : crease 1e4) it folds to equilibrium with every triangle open."""
+    triangles can collapse, and a solve stuck on that kink stops by itself and says which
+    triangle; with bars 10x stiffer (axial : crease 1e4) it folds to equilibrium with every
+    triangle open."""
     path = SHARED / "origami-simulator" / "doc" / "triangulations.svg"
     if not path.exists():
         pytest.skip(f"{path} is absent")
     cp = _load(path)
-    res = fold(cp, max_iter=200)  # stalled after 93 here; with the suite's XLA flags it creeps
+    # on the kink Newton's energy fell by rounding-sized amounts each iteration: it ran to any
+    # iteration limit (with the suite's XLA flags) before such falls stopped counting as progress
+    res = fold(cp, max_iter=1000)
+    assert res.converged or res.status == Status.STALLED, res.reason
     if not res.converged and len(res.collapsed):
         t = res.collapsed[0]
         assert f"triangle {t} (vertices" in res.reason, res.reason

@@ -85,8 +85,10 @@ class Progress(NamedTuple):
         inf = jnp.full((), jnp.inf, dtype)
         return Progress(inf, inf, jnp.zeros((), jnp.int32))
 
-    def update(self, finite: Array, grad_max: Array, energy: Array) -> Progress:
-        improved = finite & ((grad_max < self.best_grad) | (energy < self.best_energy))
+    def update(self, finite: Array, grad_max: Array, energy: Array, noise=0.0) -> Progress:
+        """``noise``: how much the energy can move by rounding alone; a fall within it is no
+        progress (a solve creeping along a kink by rounding-sized steps would never stall)."""
+        improved = finite & ((grad_max < self.best_grad) | (energy < self.best_energy - noise))
         return Progress(
             best_grad=jnp.where(finite, jnp.minimum(grad_max, self.best_grad), self.best_grad),
             best_energy=jnp.where(finite, jnp.minimum(energy, self.best_energy), self.best_energy),

@@ -587,8 +587,8 @@ class Newton:
         gradient's noise floor (float32 Miura-ori 10 x 10 stalled above it). ``inf``: never.
       max_linesearch_steps: halvings of the step before an iteration gives up.
       max_stalls: iterations in a row without a step before giving up (STALLED).
-      patience: iterations with neither a new lowest energy nor a new smallest gradient before
-        giving up (STALLED).
+      patience: iterations with neither a new lowest energy (lower by more than the energy's
+        rounding noise) nor a new smallest gradient before giving up (STALLED).
     """
 
     linear_solver: str = "auto"
@@ -707,7 +707,8 @@ class Newton:
         return sparse
 
     def _attempt(self, s: NewtonState, problem: Problem, exact: Array):
-        """Step, limit, backtracking and expansion: (u, energy, accepted, full step taken).
+        """Step, limit, backtracking and expansion: (u, energy, accepted, full step taken,
+        the energy's rounding noise at the start).
 
         A step that turns the sheet is taken free of the gauge (see ``free_turn``): its
         infinitesimal rigid motion removed (:func:`rigid_free`), the new positions then moved
@@ -795,7 +796,8 @@ class Newton:
 
             alpha, value, _, _ = jax.lax.while_loop(grow, double, (alpha, value, True, 0))
         end = point(alpha)
-        return jnp.where(unpin, reframe(end, problem), end) - problem.start, value, accepted, full
+        u = jnp.where(unpin, reframe(end, problem), end) - problem.start
+        return u, value, accepted, full, noise
 
     def _acceleration(self, s: NewtonState, problem: Problem, x, velocity: Array, solve) -> Array:
         """``a = -H^-1 J^T W r''[v, v]`` at positions ``x`` (zero when too large or not
@@ -820,7 +822,7 @@ class Newton:
         """One Newton iteration (pure)."""
         # one attempt per iteration (one factorization compiled): an exact-Hessian attempt that
         # fails costs an iteration and hands over to the convex part
-        u, value, accepted, full = self._attempt(s, problem, s.exact)
+        u, value, accepted, full, noise = self._attempt(s, problem, s.exact)
         retry = s.exact & ~accepted
         new_value, grad, gmax = _value_and_grad(u, problem, s.reference)
         finite = accepted & jnp.isfinite(new_value) & jnp.isfinite(gmax)
@@ -834,7 +836,7 @@ class Newton:
             2 ** jnp.minimum(failures, 4) - 1,
             jnp.where(take & full, jnp.maximum(s.cooldown - 1, 0), s.cooldown),
         )
-        progress = s.progress.update(take, gmax, new_value)
+        progress = s.progress.update(take, gmax, new_value, noise)
         converged = take & has_converged(gmax, s.grad_max0, problem, s.grad_max)
         stalled = (stalls >= self.max_stalls) | (progress.since_best >= self.patience)
         nonfinite = accepted & ~finite
