@@ -429,44 +429,150 @@ def _counterclockwise(vertices, face, k) -> tuple[int, ...]:
 # triangulation
 
 
+# a triangle whose altitude is below this fraction of its longest side is a sliver: the bars
+# hardly keep it from collapsing (see origami_jax.metrics.collapsed_triangles)
+SLIVER = 1e-2
+
+
+def _quality(p: np.ndarray) -> np.ndarray:
+    """(...,) twice the area over the longest side squared of 2-D triangles ``p`` (..., 3, 2):
+    the altitude on the longest side over its length; larger is rounder (equilateral 0.87)."""
+    u, v = p[..., 1, :] - p[..., 0, :], p[..., 2, :] - p[..., 0, :]
+    area2 = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    longest = np.max(np.sum((p - np.roll(p, 1, axis=-2)) ** 2, axis=-1), axis=-1)
+    return area2 / np.maximum(longest, np.finfo(float).tiny)
+
+
 def _triangulate(points: np.ndarray, face: tuple[int, ...], k: int) -> list[tuple[int, int, int]]:
-    """Ear clipping of a simple counterclockwise polygon, taking the best-shaped ear first."""
-    idx = list(range(len(face)))
+    """Triangles of a simple counterclockwise polygon: ear clipping, the best-shaped ear first;
+    where that leaves a sliver, the triangulation whose worst triangle is best, if better."""
+    tris = _clip_ears(points, face, k)
+    if 4 < len(face) <= 200:  # the search holds (n, n, n) arrays
+        where = {v: i for i, v in enumerate(face)}
+        local = np.array([[where[v] for v in t] for t in tris])
+        if np.min(_quality(points[local])) < SLIVER:
+            found = _max_min_triangulation(points)
+            if found is not None and np.min(_quality(points[found])) > np.min(
+                _quality(points[local])
+            ):
+                return [tuple(face[i] for i in t) for t in found]
+    return tris
+
+
+def _diagonals(points: np.ndarray) -> np.ndarray:
+    """(n, n) whether the segment between polygon vertices i and j is a side or an inner
+    diagonal of the simple counterclockwise polygon ``points`` (touching no other vertex)."""
+    n = len(points)
+    nxt = np.roll(points, -1, axis=0)
+    prv = np.roll(points, 1, axis=0)
+
+    def cross(o, a, b):
+        return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (
+            b[..., 0] - o[..., 0]
+        )
+
+    pi, pj = points[:, None, :], points[None, :, :]
+    # leaves i into the polygon's interior: inside the angle at i (convex or reflex)
+    convex = cross(prv, points, nxt) > 0
+    a = cross(pi, nxt[:, None, :], pj) > 0  # j left of i -> i+1
+    b = cross(pi, pj, prv[:, None, :]) > 0  # i-1 left of i -> j
+    inside = np.where(convex[:, None], a & b, a | b)
+    # crossing or touching any side (e, e+1) that does not end at i or j
+    e0, e1 = points[None, None, :, :], nxt[None, None, :, :]
+    s0, s1 = pi[:, :, None, :], pj[:, :, None, :]
+    d1, d2 = cross(s0, s1, e0), cross(s0, s1, e1)
+    d3, d4 = cross(e0, e1, s0), cross(e0, e1, s1)
+    span = float(np.ptp(points, axis=0).max())
+    eps = 1e-12 * span * span
+    hits = (np.minimum(d1, d2) <= eps) & (np.maximum(d1, d2) >= -eps)
+    hits &= (np.minimum(d3, d4) <= eps) & (np.maximum(d3, d4) >= -eps)
+    idx = np.arange(n)
+    ends = (idx[None, None, :] == idx[:, None, None]) | (idx[None, None, :] == idx[None, :, None])
+    ends |= ((idx[None, None, :] + 1) % n == idx[:, None, None]) | (
+        (idx[None, None, :] + 1) % n == idx[None, :, None]
+    )
+    ok = inside & ~np.any(hits & ~ends, axis=2)
+    side = (idx[:, None] - idx[None, :]) % n
+    ok |= (side == 1) | (side == n - 1)
+    np.fill_diagonal(ok, False)
+    return ok
+
+
+def _max_min_triangulation(points: np.ndarray) -> list[tuple[int, int, int]] | None:
+    """The triangulation of a simple counterclockwise polygon that maximizes its worst
+    triangle's :func:`_quality` (dynamic programming over the polygon's diagonals, vectorized
+    over the chains of each length); ``None`` if it finds none."""
+    n = len(points)
+    ok = _diagonals(points)
+    best = np.full((n, n), -np.inf)
+    split = np.full((n, n), -1)
+    best[np.arange(n - 1), np.arange(1, n)] = np.inf
+    for length in range(2, n):
+        i = np.arange(n - length)
+        j = i + length
+        k = i[:, None] + np.arange(1, length)[None, :]
+        ii, jj = np.broadcast_to(i[:, None], k.shape), np.broadcast_to(j[:, None], k.shape)
+        q = _quality(points[np.stack([ii, k, jj], axis=-1)])
+        value = np.minimum(np.minimum(best[ii, k], best[k, jj]), q)
+        value[~(ok[ii, k] & ok[k, jj])] = -np.inf
+        m = np.argmax(value, axis=1)  # the first of equals: deterministic
+        v = value[np.arange(len(i)), m]
+        good = ok[i, j] & (v > -np.inf)
+        best[i[good], j[good]] = v[good]
+        split[i[good], j[good]] = k[np.arange(len(i)), m][good]
+    if split[0, n - 1] < 0:
+        return None
+    out, stack = [], [(0, n - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i >= 2:
+            k = int(split[i, j])
+            out.append((i, k, j))
+            stack += [(i, k), (k, j)]
+    return out
+
+
+def _clip_ears(points: np.ndarray, face: tuple[int, ...], k: int) -> list[tuple[int, int, int]]:
+    """Ear clipping of a simple counterclockwise polygon, taking the best-shaped ear first
+    (each round tests every ear against every vertex at once)."""
+    idx = np.arange(len(face))
     out: list[tuple[int, int, int]] = []
     span = float(np.ptp(points, axis=0).max())
     eps = 1e-12 * span * span
+
+    def cross(o, u, v):
+        return (u[..., 0] - o[..., 0]) * (v[..., 1] - o[..., 1]) - (u[..., 1] - o[..., 1]) * (
+            v[..., 0] - o[..., 0]
+        )
+
     while len(idx) > 3:
+        a, b, c = np.roll(idx, 1), idx, np.roll(idx, -1)
+        pa, pb, pc = points[a], points[b], points[c]
+        area2 = cross(pa, pb, pc)
+        pv = points[idx][None]
+        inside = cross(pa[:, None], pb[:, None], pv) >= -eps
+        inside &= cross(pb[:, None], pc[:, None], pv) >= -eps
+        inside &= cross(pc[:, None], pa[:, None], pv) >= -eps
+        own = (idx[None] == a[:, None]) | (idx[None] == b[:, None]) | (idx[None] == c[:, None])
+        usable = (area2 > eps) & ~np.any(inside & ~own, axis=1)
+        longest = np.max(
+            [np.linalg.norm(pb - pa, axis=1), np.linalg.norm(pc - pb, axis=1),
+             np.linalg.norm(pa - pc, axis=1)],
+            axis=0,
+        )  # fmt: skip
+        quality = area2 / longest**2  # larger is rounder
         best, best_q = -1, -np.inf
-        n = len(idx)
-        for s in range(n):
-            a, b, c = idx[s - 1], idx[s], idx[(s + 1) % n]
-            pa, pb, pc = points[a], points[b], points[c]
-            area2 = (pb[0] - pa[0]) * (pc[1] - pa[1]) - (pb[1] - pa[1]) * (pc[0] - pa[0])
-            if area2 <= eps:
-                continue
-            if any(_in_triangle(points[v], pa, pb, pc, eps) for v in idx if v not in (a, b, c)):
-                continue
-            sides = sorted(
-                [np.linalg.norm(pb - pa), np.linalg.norm(pc - pb), np.linalg.norm(pa - pc)]
-            )
-            q = area2 / (sides[2] ** 2)  # larger is rounder
+        for s in np.flatnonzero(usable):
             # ties (a parallelogram's two ears) go to the first ear, not to rounding, so
             # variants of one pattern keep one triangulation (where no other ear overtakes)
-            if q > best_q * (1 + 1e-9) + 1e-300:
-                best, best_q = s, q
+            if quality[s] > best_q * (1 + 1e-9) + 1e-300:
+                best, best_q = int(s), quality[s]
         if best < 0:
             raise PatternError(f"face {k}: is not a simple polygon (cannot be triangulated)")
-        out.append((idx[best - 1], idx[best], idx[(best + 1) % n]))
-        del idx[best]
-    out.append((idx[0], idx[1], idx[2]))
+        out.append((int(a[best]), int(b[best]), int(c[best])))
+        idx = np.delete(idx, best)
+    out.append((int(idx[0]), int(idx[1]), int(idx[2])))
     return [(face[a], face[b], face[c]) for a, b, c in out]
-
-
-def _in_triangle(p, a, b, c, eps) -> bool:
-    def cross(o, u, v):
-        return (u[0] - o[0]) * (v[1] - o[1]) - (u[1] - o[1]) * (v[0] - o[0])
-
-    return cross(a, b, p) >= -eps and cross(b, c, p) >= -eps and cross(c, a, p) >= -eps
 
 
 def find_root(parent, v):

@@ -486,6 +486,8 @@ POLYGONS = {
         for s in range(10)
     ],  # fmt: skip
     "collinear side": [(0, 0), (1, 0), (2, 0), (3, 0), (3, 1), (0, 1)],
+    # Origami Simulator's cuts.svg has such a face: ear clipping left a 3e-6 sliver
+    "nearly collinear side": [(1e-5, 1.0), (0.0, 0.72), (0.0, 0.62), (1e-5, 0.0), (0.25, 0.0)],
     "spiral notch": [
         (0, 0),
         (4, 0),
@@ -572,6 +574,56 @@ def test_pattern_edges_are_kept_first_in_order():
     assert m.num_edges == len(edges) + len(faces)
 
 
+def test_a_face_that_ear_clipping_leaves_a_sliver_gets_its_best_triangulation():
+    """Where the best-ear-first clipping leaves a sliver (bars hardly keep it open), the face
+    takes the triangulation whose worst triangle is best; others keep the ear clipping's."""
+    from origami_jax.pattern import _clip_ears, _quality
+
+    points = np.array(POLYGONS["nearly collinear side"])
+    face = tuple(range(len(points)))
+    clipped = np.array(_clip_ears(points, face, 0))
+    assert np.min(_quality(points[clipped])) < 1e-4
+    cp, m = _check_polygon_triangulation(points)
+    assert np.min(_quality(m.vertices[m.triangles][:, :, :2])) > 0.03
+    star = POLYGONS["star"]
+    cp, m = _check_polygon_triangulation(star)
+    np.testing.assert_array_equal(m.triangles, _clip_ears(np.array(star), tuple(range(10)), 0))
+
+
+def _all_triangulations(n: int):
+    """Every triangulation of a convex n-gon (vertices 0..n-1), as lists of triangles."""
+
+    def chain(i, j):
+        if j - i < 2:
+            yield []
+            return
+        for k in range(i + 1, j):
+            for left in chain(i, k):
+                for right in chain(k, j):
+                    yield [*left, (i, k, j), *right]
+
+    yield from chain(0, n - 1)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    gaps=st.lists(st.floats(0.05, 1.0), min_size=5, max_size=8),
+    squash=st.floats(0.01, 1.0),
+)
+def test_max_min_triangulation_is_the_best_of_all(gaps, squash):
+    """On random convex polygons (squashed ellipses: thin triangles) the search finds the
+    triangulation whose worst triangle is best, against all of them enumerated."""
+    from origami_jax.pattern import _max_min_triangulation, _quality
+
+    angles = np.cumsum(np.asarray(gaps) * (2 * PI / sum(gaps)))
+    points = np.stack([np.cos(angles), squash * np.sin(angles)], axis=1)
+    found = np.array(_max_min_triangulation(points))
+    assert found.shape == (len(points) - 2, 3)
+    best = max(np.min(_quality(points[np.array(t)])) for t in _all_triangulations(len(points)))
+    assert np.min(_quality(points[found])) == pytest.approx(best, rel=1e-12)
+    assert sum(signed_area(points[t]) for t in found) == pytest.approx(signed_area(points))
+
+
 @settings(max_examples=80, deadline=None)
 @given(
     gaps=st.lists(st.floats(0.2, 1.0), min_size=3, max_size=14),
@@ -586,6 +638,19 @@ def test_star_shaped_polygons_triangulate(gaps, radii, rotation, reverse):
     angles = rotation + np.cumsum(gaps)
     points = [(r * math.cos(a), r * math.sin(a)) for r, a in zip(radii, angles, strict=False)]
     _check_polygon_triangulation(points, reverse)
+    # the max-min search on its own (the face above takes it only after a sliver): it uses
+    # inner diagonals only, also where the polygon is not convex
+    from origami_jax.pattern import _max_min_triangulation
+
+    points = np.array(points)
+    found = np.array(_max_min_triangulation(points))
+    assert found.shape == (len(points) - 2, 3)
+    assert all(signed_area(points[t]) > 0 for t in found)
+    assert sum(signed_area(points[t]) for t in found) == pytest.approx(signed_area(points))
+    sides = {tuple(sorted(t[[i, (i + 1) % 3]])) for t in found for i in range(3)}
+    for a, b in sides:
+        if (b - a) % len(points) not in (1, len(points) - 1):
+            assert inside(0.5 * (points[a] + points[b]), points), (a, b)
 
 
 # ---------------------------------------------------------------------------------------------
