@@ -7,7 +7,9 @@ Conventions (the FOLD 1.2 conventions, see README):
 * assignments are FOLD letters: ``B`` border, ``M`` mountain, ``V`` valley, ``F`` flat crease,
   ``U`` unassigned, ``C`` cut, ``J`` join;
 * faces are polygons; they are re-oriented counterclockwise (seen from +z) and triangulated,
-  the added edges being facet creases (target 0).
+  the added edges being facet creases (target 0): by ear clipping, the best-shaped ear first,
+  or, where that leaves a sliver (altitude under 1e-2 of the longest side, which the bars
+  hardly keep from collapsing), by the triangulation whose worst triangle is best.
 
 How each assignment enters the model:
 
