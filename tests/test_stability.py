@@ -83,16 +83,18 @@ def test_full_folds_do_not_pass_through_pi(solver):
 
 
 def sliver_pattern(height: float = 5e-5) -> CreasePattern:
-    """A unit square with a valley crease down the middle; the right half's bottom side has a
-    vertex ``height`` below the line, so triangulating it makes a sliver of aspect 2 height."""
+    """A unit square with a valley crease down the middle; below the right half's bottom side
+    hangs a face of its own, a sliver triangle of aspect 2 height (a vertex ``height`` below
+    the side, joined to the half by a flat crease). A polygon face is triangulated around such
+    a vertex where it can (see origami_jax.pattern); a triangle face is kept as it is."""
     vertices = [[0, 0], [0.5, 0], [1, 0], [1, 1], [0.5, 1], [0, 1], [0.75, -height]]
-    edges = [[0, 1], [1, 6], [6, 2], [2, 3], [3, 4], [4, 5], [5, 0], [1, 4]]
+    edges = [[0, 1], [1, 6], [6, 2], [2, 3], [3, 4], [4, 5], [5, 0], [1, 4], [1, 2]]
     return CreasePattern(
         vertices=vertices,
         edges=edges,
-        faces=[[0, 1, 4, 5], [1, 6, 2, 3, 4]],
-        assignments="BBBBBBBV",
-        fold_angles=[0] * 7 + [2.0],
+        faces=[[0, 1, 4, 5], [1, 6, 2], [1, 2, 3, 4]],
+        assignments="BBBBBBBVF",
+        fold_angles=[0] * 7 + [2.0, 0],
         name="sliver",
     )
 
