@@ -449,7 +449,7 @@ def _triangulate(points: np.ndarray, face: tuple[int, ...], k: int) -> list[tupl
     """Triangles of a simple counterclockwise polygon: ear clipping, the best-shaped ear first;
     where that leaves a sliver, the triangulation whose worst triangle is best, if better."""
     tris = _clip_ears(points, face, k)
-    if 4 < len(face) <= 200:  # the search holds (n, n, n) arrays
+    if len(face) <= 200:  # the search holds (n, n, n) arrays
         where = {v: i for i, v in enumerate(face)}
         local = np.array([[where[v] for v in t] for t in tris])
         if np.min(_quality(points[local])) < SLIVER:
@@ -488,6 +488,12 @@ def _diagonals(points: np.ndarray) -> np.ndarray:
     eps = 1e-12 * span * span
     hits = (np.minimum(d1, d2) <= eps) & (np.maximum(d1, d2) >= -eps)
     hits &= (np.minimum(d3, d4) <= eps) & (np.maximum(d3, d4) >= -eps)
+    # on one line the four signs all vanish: a hit only where the side overlaps the diagonal
+    collinear = (np.abs(d1) <= eps) & (np.abs(d2) <= eps)
+    axis = s1 - s0
+    t0, t1 = np.sum((e0 - s0) * axis, axis=-1), np.sum((e1 - s0) * axis, axis=-1)
+    overlap = (np.maximum(t0, t1) >= -eps) & (np.minimum(t0, t1) <= np.sum(axis * axis, -1) + eps)
+    hits &= ~collinear | overlap
     idx = np.arange(n)
     ends = (idx[None, None, :] == idx[:, None, None]) | (idx[None, None, :] == idx[None, :, None])
     ends |= ((idx[None, None, :] + 1) % n == idx[:, None, None]) | (

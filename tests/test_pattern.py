@@ -588,6 +588,25 @@ def test_a_face_that_ear_clipping_leaves_a_sliver_gets_its_best_triangulation():
     star = POLYGONS["star"]
     cp, m = _check_polygon_triangulation(star)
     np.testing.assert_array_equal(m.triangles, _clip_ears(np.array(star), tuple(range(10)), 0))
+    # a quad too: ear clipping keeps its best ear, a sliver of 0.007; the other diagonal 0.30
+    quad = np.array([[0.033, 0.990], [0.245, 0.041], [0.626, 0.552], [0.389, 0.733]])
+    clipped = np.array(_clip_ears(quad, (0, 1, 2, 3), 0))
+    assert np.min(_quality(quad[clipped])) < 0.01
+    cp, m = _check_polygon_triangulation(quad)
+    assert np.min(_quality(m.vertices[m.triangles][:, :, :2])) > 0.29
+
+
+def test_a_diagonal_on_the_line_of_a_distant_side_is_inside():
+    """Collinear with a side that it does not touch, a diagonal is still a diagonal (the four
+    orientation signs all vanish on one line: only an overlap is a hit)."""
+    from origami_jax.pattern import _diagonals
+
+    points = [(0, 0), (2.5, 0), (3, 1), (3.5, 0), (6, 0), (6, 1), (5, 1), (5, 2), (6, 2), (6, 4),
+              (0, 4), (0, 2), (1, 2), (1, 1), (0, 1)]  # fmt: skip
+    ok = _diagonals(np.array(points, float))
+    assert ok[2, 13] and ok[13, 2]  # (3, 1)-(1, 1), on the line of side (6, 1)-(5, 1)
+    assert ok[2, 6]  # (3, 1)-(5, 1): up to that side's end
+    assert not ok[2, 5] and not ok[13, 6]  # through the vertex (5, 1), through (3, 1)
 
 
 def _all_triangulations(n: int):
