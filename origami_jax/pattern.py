@@ -479,27 +479,29 @@ def _diagonals(points: np.ndarray) -> np.ndarray:
     a = cross(pi, nxt[:, None, :], pj) > 0  # j left of i -> i+1
     b = cross(pi, pj, prv[:, None, :]) > 0  # i-1 left of i -> j
     inside = np.where(convex[:, None], a & b, a | b)
-    # crossing or touching any side (e, e+1) that does not end at i or j
-    e0, e1 = points[None, None, :, :], nxt[None, None, :, :]
-    s0, s1 = pi[:, :, None, :], pj[:, :, None, :]
-    d1, d2 = cross(s0, s1, e0), cross(s0, s1, e1)
-    d3, d4 = cross(e0, e1, s0), cross(e0, e1, s1)
+    # crossing or touching any side (e, e+1) that does not end at i or j; 16 rows of (n, n, n)
+    # at a time, so a 200-vertex face needs megabytes, not hundreds of them
     span = float(np.ptp(points, axis=0).max())
     eps = 1e-12 * span * span
-    hits = (np.minimum(d1, d2) <= eps) & (np.maximum(d1, d2) >= -eps)
-    hits &= (np.minimum(d3, d4) <= eps) & (np.maximum(d3, d4) >= -eps)
-    # on one line the four signs all vanish: a hit only where the side overlaps the diagonal
-    collinear = (np.abs(d1) <= eps) & (np.abs(d2) <= eps)
-    axis = s1 - s0
-    t0, t1 = np.sum((e0 - s0) * axis, axis=-1), np.sum((e1 - s0) * axis, axis=-1)
-    overlap = (np.maximum(t0, t1) >= -eps) & (np.minimum(t0, t1) <= np.sum(axis * axis, -1) + eps)
-    hits &= ~collinear | overlap
     idx = np.arange(n)
-    ends = (idx[None, None, :] == idx[:, None, None]) | (idx[None, None, :] == idx[None, :, None])
-    ends |= ((idx[None, None, :] + 1) % n == idx[:, None, None]) | (
-        (idx[None, None, :] + 1) % n == idx[None, :, None]
-    )
-    ok = inside & ~np.any(hits & ~ends, axis=2)
+    blocked = np.zeros((n, n), bool)
+    e0, e1 = points[None, None, :, :], nxt[None, None, :, :]
+    for rows in np.array_split(idx, max(1, n // 16)):
+        s0, s1 = pi[rows, :, None, :], pj[:, :, None, :]
+        d1, d2 = cross(s0, s1, e0), cross(s0, s1, e1)
+        d3, d4 = cross(e0, e1, s0), cross(e0, e1, s1)
+        hits = (np.minimum(d1, d2) <= eps) & (np.maximum(d1, d2) >= -eps)
+        hits &= (np.minimum(d3, d4) <= eps) & (np.maximum(d3, d4) >= -eps)
+        # on one line the four signs all vanish: a hit only where the side overlaps the diagonal
+        collinear = (np.abs(d1) <= eps) & (np.abs(d2) <= eps)
+        axis = s1 - s0
+        t0, t1 = np.sum((e0 - s0) * axis, axis=-1), np.sum((e1 - s0) * axis, axis=-1)
+        length2 = np.sum(axis * axis, axis=-1)
+        hits &= ~collinear | ((np.maximum(t0, t1) >= -eps) & (np.minimum(t0, t1) <= length2 + eps))
+        e, i, j = idx[None, None, :], rows[:, None, None], idx[None, :, None]
+        ends = (e == i) | (e == j) | ((e + 1) % n == i) | ((e + 1) % n == j)
+        blocked[rows] = np.any(hits & ~ends, axis=2)
+    ok = inside & ~blocked
     side = (idx[:, None] - idx[None, :]) % n
     ok |= (side == 1) | (side == n - 1)
     np.fill_diagonal(ok, False)
