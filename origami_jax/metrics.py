@@ -21,7 +21,7 @@ from jax import Array
 
 from origami_jax.energy import FoldParams, Structure, energy, hinge_goals
 from origami_jax.geometry import bar_lengths, fold_angles
-from origami_jax.pattern import Mesh
+from origami_jax.pattern import Mesh, triangle_quality
 from origami_jax.solvers.base import COLLAPSED_AREA, doubled_areas
 
 __all__ = [
@@ -113,9 +113,7 @@ def collapse_note(x: np.ndarray, mesh: Mesh) -> str:
     if not len(found):
         return ""
     t = int(found[0])
-    p = np.asarray(mesh.vertices, np.float64)[mesh.triangles[t]]
-    sides = np.linalg.norm(p - np.roll(p, 1, axis=0), axis=1)
-    aspect = doubled_areas(p[None])[0] / np.max(sides) ** 2  # altitude over longest side
+    aspect = abs(triangle_quality(np.asarray(mesh.vertices)[mesh.triangles[t], :2]))
     more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
     return (
         f"triangle {t} (vertices {', '.join(str(int(v)) for v in mesh.triangles[t])}) collapsed "

@@ -436,11 +436,18 @@ def _counterclockwise(vertices, face, k) -> tuple[int, ...]:
 SLIVER = 1e-2
 
 
-def _quality(p: np.ndarray) -> np.ndarray:
+def _orient(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Twice the signed area of the 2-D triangles ``(o, a, b)`` (..., 2) each: > 0 when ``b``
+    lies left of ``o -> a``."""
+    return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (
+        b[..., 0] - o[..., 0]
+    )
+
+
+def triangle_quality(p: np.ndarray) -> np.ndarray:
     """(...,) twice the area over the longest side squared of 2-D triangles ``p`` (..., 3, 2):
     the altitude on the longest side over its length; larger is rounder (equilateral 0.87)."""
-    u, v = p[..., 1, :] - p[..., 0, :], p[..., 2, :] - p[..., 0, :]
-    area2 = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    area2 = _orient(p[..., 0, :], p[..., 1, :], p[..., 2, :])
     longest = np.max(np.sum((p - np.roll(p, 1, axis=-2)) ** 2, axis=-1), axis=-1)
     return area2 / np.maximum(longest, np.finfo(float).tiny)
 
@@ -448,17 +455,13 @@ def _quality(p: np.ndarray) -> np.ndarray:
 def _triangulate(points: np.ndarray, face: tuple[int, ...], k: int) -> list[tuple[int, int, int]]:
     """Triangles of a simple counterclockwise polygon: ear clipping, the best-shaped ear first;
     where that leaves a sliver, the triangulation whose worst triangle is best, if better."""
-    tris = _clip_ears(points, face, k)
-    if len(face) <= 200:  # the search holds (n, n, n) arrays
-        where = {v: i for i, v in enumerate(face)}
-        local = np.array([[where[v] for v in t] for t in tris])
-        if np.min(_quality(points[local])) < SLIVER:
-            found = _max_min_triangulation(points)
-            if found is not None and np.min(_quality(points[found])) > np.min(
-                _quality(points[local])
-            ):
-                return [tuple(face[i] for i in t) for t in found]
-    return tris
+    tris = _clip_ears(points, k)
+    worst = np.min(triangle_quality(points[np.array(tris)]))
+    if worst < SLIVER and len(face) <= 200:  # the search holds (n, n, n) arrays
+        found = _max_min_triangulation(points)
+        if found is not None and np.min(triangle_quality(points[np.array(found)])) > worst:
+            tris = found
+    return [(face[a], face[b], face[c]) for a, b, c in tris]
 
 
 def _diagonals(points: np.ndarray) -> np.ndarray:
@@ -467,12 +470,7 @@ def _diagonals(points: np.ndarray) -> np.ndarray:
     n = len(points)
     nxt = np.roll(points, -1, axis=0)
     prv = np.roll(points, 1, axis=0)
-
-    def cross(o, a, b):
-        return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (
-            b[..., 0] - o[..., 0]
-        )
-
+    cross = _orient
     pi, pj = points[:, None, :], points[None, :, :]
     # leaves i into the polygon's interior: inside the angle at i (convex or reflex)
     convex = cross(prv, points, nxt) > 0
@@ -510,8 +508,8 @@ def _diagonals(points: np.ndarray) -> np.ndarray:
 
 def _max_min_triangulation(points: np.ndarray) -> list[tuple[int, int, int]] | None:
     """The triangulation of a simple counterclockwise polygon that maximizes its worst
-    triangle's :func:`_quality` (dynamic programming over the polygon's diagonals, vectorized
-    over the chains of each length); ``None`` if it finds none."""
+    triangle's :func:`triangle_quality` (dynamic programming over the polygon's diagonals,
+    vectorized over the chains of each length); ``None`` if it finds none."""
     n = len(points)
     ok = _diagonals(points)
     best = np.full((n, n), -np.inf)
@@ -522,7 +520,7 @@ def _max_min_triangulation(points: np.ndarray) -> list[tuple[int, int, int]] | N
         j = i + length
         k = i[:, None] + np.arange(1, length)[None, :]
         ii, jj = np.broadcast_to(i[:, None], k.shape), np.broadcast_to(j[:, None], k.shape)
-        q = _quality(points[np.stack([ii, k, jj], axis=-1)])
+        q = triangle_quality(points[np.stack([ii, k, jj], axis=-1)])
         value = np.minimum(np.minimum(best[ii, k], best[k, jj]), q)
         value[~(ok[ii, k] & ok[k, jj])] = -np.inf
         m = np.argmax(value, axis=1)  # the first of equals: deterministic
@@ -542,19 +540,15 @@ def _max_min_triangulation(points: np.ndarray) -> list[tuple[int, int, int]] | N
     return out
 
 
-def _clip_ears(points: np.ndarray, face: tuple[int, ...], k: int) -> list[tuple[int, int, int]]:
-    """Ear clipping of a simple counterclockwise polygon, taking the best-shaped ear first
-    (each round tests every ear against every vertex at once)."""
-    idx = np.arange(len(face))
+def _clip_ears(points: np.ndarray, k: int) -> list[tuple[int, int, int]]:
+    """Ear clipping of a simple counterclockwise polygon (face ``k``), taking the best-shaped
+    ear first (each round tests every ear against every vertex at once); triangles of indices
+    into ``points``."""
+    idx = np.arange(len(points))
     out: list[tuple[int, int, int]] = []
     span = float(np.ptp(points, axis=0).max())
     eps = 1e-12 * span * span
-
-    def cross(o, u, v):
-        return (u[..., 0] - o[..., 0]) * (v[..., 1] - o[..., 1]) - (u[..., 1] - o[..., 1]) * (
-            v[..., 0] - o[..., 0]
-        )
-
+    cross = _orient
     while len(idx) > 3:
         a, b, c = np.roll(idx, 1), idx, np.roll(idx, -1)
         pa, pb, pc = points[a], points[b], points[c]
@@ -570,6 +564,7 @@ def _clip_ears(points: np.ndarray, face: tuple[int, ...], k: int) -> list[tuple[
              np.linalg.norm(pa - pc, axis=1)],
             axis=0,
         )  # fmt: skip
+        # as triangle_quality, but through the sides' norms, as ever: ties resolve as before
         quality = area2 / longest**2  # larger is rounder
         best, best_q = -1, -np.inf
         for s in np.flatnonzero(usable):
@@ -582,7 +577,7 @@ def _clip_ears(points: np.ndarray, face: tuple[int, ...], k: int) -> list[tuple[
         out.append((int(a[best]), int(b[best]), int(c[best])))
         idx = np.delete(idx, best)
     out.append((int(idx[0]), int(idx[1]), int(idx[2])))
-    return [(face[a], face[b], face[c]) for a, b, c in out]
+    return out
 
 
 def find_root(parent, v):
