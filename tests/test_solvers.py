@@ -104,6 +104,34 @@ def test_newton_sparse_and_dense_agree(monkeypatch):
     assert not hostsparse._KEPT
 
 
+@pytest.mark.parametrize("linear_solver", ["dense", "sparse"])
+def test_an_exact_hessian_that_does_not_factor_hands_over_within_the_iteration(linear_solver):
+    """Asked for the exact Hessian where it is indefinite (a sheet shrunk by a fifth: every bar
+    compressed, so its transverse stiffness is negative), the factorization takes the convex
+    part's step at once and says so; where the exact Hessian factors it is used."""
+    cp = patterns.miura_ori(3, 3)
+    mesh = cp.mesh
+    solver = Newton(linear_solver=linear_solver)
+
+    @jax.jit
+    def newton_step(s, problem, exact):
+        solve, used = solver._factor(s, problem, exact, keep=False)
+        step, ok = solve(-s.grad)
+        return step, ok, used[0]
+
+    steps = {}
+    for name, start in (("shrunk", 0.8 * mesh.vertices), ("flat", mesh.vertices)):
+        problem = make_problem(mesh, make_structure(mesh), make_params(cp), start, 1e-9)
+        problem = prepare(solver, problem, mesh)
+        s = solver.init(problem)
+        for exact in (True, False):
+            step, ok, used = newton_step(s, problem, jnp.asarray(exact))
+            assert bool(ok) and bool(used) == (exact and name == "flat"), (name, exact)
+            steps[name, exact] = np.asarray(step)
+    np.testing.assert_array_equal(steps["shrunk", True], steps["shrunk", False])
+    assert np.max(np.abs(steps["flat", True] - steps["flat", False])) > 1e-3
+
+
 def test_host_sparse_backends_agree_and_fail_cleanly(monkeypatch):
     """CHOLMOD (when cvxopt is installed) and SuperLU give the same solution; a matrix that is
     not positive definite gives ok=False and zeros; a kept factorization solves once."""

@@ -10,9 +10,12 @@ Hessian can be indefinite, so the method works with two matrices:
   ``k l0 grad(rho) grad(rho)^T``, which drops ``k l0 (rho - goal) hess(rho)``;
 * the **exact Hessian**, tried once the previous iteration took the full, unlimited Newton step
   (the quadratic region), and kept as long as it gives a descent step that the line search
-  accepts whole; otherwise the iteration falls back to the convex part. After the n-th
-  rejected exact attempt in a row the next waits for 2^n - 1 full convex steps (at most 15):
-  on box.fold, where they alternated, that took 259 iterations down to 59.
+  accepts whole; otherwise the iteration falls back to the convex part. An exact Hessian that
+  does not factor (not positive definite) hands over to the convex part within the same
+  iteration (an iteration less each: Miura-ori 30 x 30 14 -> 11, 100 x 100 20 -> 17; not in
+  ``fold_batch``, where vmap would compute both every iteration). After the n-th rejected
+  exact attempt in a row the next waits for 2^n - 1 full convex steps (at most 15): on
+  box.fold, where they alternated, that took 259 iterations down to 59.
 
 A Levenberg-Marquardt shift ``mu * diag(H)`` (``mu`` from ``mu_min``, grown 10x, from at least
 1e-10, whenever no step is found, and shrunk 10x with every step taken) keeps the system
@@ -103,7 +106,7 @@ __all__ = [
         "piece",
         "plan",
     ],
-    meta_fields=[],
+    meta_fields=["batched"],
 )
 @dataclass(frozen=True)
 class HessianLayout:
@@ -125,7 +128,7 @@ class HessianLayout:
 
     ``plan``: for a dense layout shared by a vmapped batch of one topology (``fold_batch``),
     the :class:`~origami_jax.solvers.blocksparse.BlockPlan` that solves all members at once;
-    ``None`` otherwise.
+    ``None`` otherwise. ``batched``: the layout of a vmapped batch (static).
     """
 
     order: Array
@@ -137,6 +140,7 @@ class HessianLayout:
     block_entries: Array
     piece: Array
     plan: BlockPlan | None = None
+    batched: bool = False
 
     @property
     def sparse(self) -> bool:
@@ -641,9 +645,16 @@ class Newton:
         )
 
     def _factor(self, s: NewtonState, problem: Problem, exact: Array, keep: bool):
-        """Factor ``H + mu diag H`` (exact or convex ``H``); returns ``solve(rhs) -> (step,
-        ok)`` for (V, 3) right-hand sides: the first call gives the Newton step, the second
-        (only with ``keep``) reuses the factorization."""
+        """Factor ``H + mu diag H`` (exact or convex ``H``); returns ``(solve, used)``:
+        ``solve(rhs) -> (step, ok)`` for (V, 3) right-hand sides (the first call gives the Newton
+        step, the second, only with ``keep``, reuses the factorization), and ``used``, a list
+        that holds, once the first call has run, whether the exact Hessian was factored.
+
+        An exact Hessian that does not factor hands over to the convex part within the same
+        call, so a failed exact attempt costs its factorization (which stops at the first
+        pivot that is not positive) but not a whole iteration; except in a batch
+        (``layout.batched``, :func:`~origami_jax.fold_batch`), where vmap would turn the
+        ``lax.cond`` into computing both every time: there ``used`` is ``exact``."""
         layout: HessianLayout = problem.aux
         x = positions(problem, s.u)
         if layout.plan is not None:
@@ -651,42 +662,22 @@ class Newton:
             blocks = element_blocks(x, structure, params, s.reference, exact)
             proj = _vertex_projectors(x.shape[0], problem.pinned, problem.projectors)
             factor = blocksparse.factor(layout.plan, blocks, proj, _gauge_scale(problem), s.mu)
-            return functools.partial(blocksparse.solve_factored, layout.plan, factor)
-        values = gauged_hessian(x, problem, s.reference, exact)
-        diag = values[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]]
-        floor = jnp.finfo(x.dtype).eps * jnp.max(diag)
-        values = values.at[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]].add(
-            s.mu * diag + floor
-        )
+            return functools.partial(blocksparse.solve_factored, layout.plan, factor), [exact]
 
-        def ordered(rhs):
-            return jnp.zeros(layout.size, x.dtype).at[layout.order].set(rhs.reshape(-1))
+        def shifted(hessian_exact):
+            values = gauged_hessian(x, problem, s.reference, hessian_exact)
+            diag = values[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]]
+            floor = jnp.finfo(x.dtype).eps * jnp.max(diag)
+            return values.at[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]].add(
+                s.mu * diag + floor
+            )
 
-        def unordered(sol):
-            return sol[layout.order].reshape(x.shape)
+        # first(values, b) -> (solution, ok, handle): factor and solve; again(handle, b) solves
+        # with the same factorization (dense: the Cholesky factor; sparse: the host's token)
+        if layout.sparse:
 
-        if not layout.sparse:
-            chol = _dense_factor(values.reshape(layout.size, layout.size))
-
-            def dense(rhs):
-                sol = unordered(_dense_solve_factored(chol, ordered(rhs)))
-                return sol, jnp.all(jnp.isfinite(sol))
-
-            return dense
-        token = []  # the host factorization's token, after the first solve
-
-        def sparse(rhs):
-            b = ordered(rhs)
-            if token:
-                sol = jax.pure_callback(
-                    hostsparse.resolve,
-                    jax.ShapeDtypeStruct(b.shape, b.dtype),
-                    token[0],
-                    b,
-                    vmap_method="sequential",
-                )
-            else:
-                sol, ok, t = jax.pure_callback(
+            def first(values, b):
+                return jax.pure_callback(
                     functools.partial(hostsparse.factor_solve, keep=keep),
                     (
                         jax.ShapeDtypeStruct(b.shape, b.dtype),
@@ -699,16 +690,49 @@ class Newton:
                     b,
                     vmap_method="sequential",
                 )
-                token.append(t)
-                return unordered(sol), ok
-            sol = unordered(sol)
-            return sol, jnp.all(jnp.isfinite(sol))
 
-        return sparse
+            def again(token, b):
+                return jax.pure_callback(
+                    hostsparse.resolve,
+                    jax.ShapeDtypeStruct(b.shape, b.dtype),
+                    token,
+                    b,
+                    vmap_method="sequential",
+                )
+
+        else:
+
+            def first(values, b):
+                chol = _dense_factor(values.reshape(layout.size, layout.size))
+                sol = _dense_solve_factored(chol, b)
+                return sol, jnp.all(jnp.isfinite(sol)), chol
+
+            again = _dense_solve_factored
+
+        handle, used = [], []
+
+        def solve(rhs):
+            b = jnp.zeros(layout.size, x.dtype).at[layout.order].set(rhs.reshape(-1))
+            if handle:
+                sol = again(handle[0], b)
+                ok = jnp.all(jnp.isfinite(sol))
+            else:
+                sol, ok, h = found = first(shifted(exact), b)
+                if not layout.batched and not (isinstance(exact, bool) and not exact):
+                    fail = jnp.asarray(exact) & ~ok
+                    sol, ok, h = jax.lax.cond(fail, lambda: first(shifted(False), b), lambda: found)
+                    used.append(jnp.asarray(exact) & ~fail)
+                else:
+                    used.append(jnp.asarray(exact))
+                handle.append(h)
+            return sol[layout.order].reshape(x.shape), ok
+
+        return solve, used
 
     def _attempt(self, s: NewtonState, problem: Problem, exact: Array):
         """Step, limit, backtracking and expansion: (u, energy, accepted, full step taken,
-        the energy's rounding noise at the start).
+        the energy's rounding noise at the start, whether the exact Hessian was factored: see
+        ``_factor``).
 
         A step that turns the sheet is taken free of the gauge (see ``free_turn``): its
         infinitesimal rigid motion removed (:func:`rigid_free`), the new positions then moved
@@ -722,11 +746,12 @@ class Newton:
         line search. ``a`` is dropped when ``2 |a| / |v| > acceleration``.
         """
         accelerate = self.acceleration > 0
-        solve = self._factor(s, problem, exact, keep=accelerate)
+        solve, used = self._factor(s, problem, exact, keep=accelerate)
         x = positions(problem, s.u)
         # gauged again: the Levenberg-Marquardt shift does not commute with the projectors, and
         # the line search below evaluates exactly the positions it keeps
         step, ok = solve(-gauge(problem, s.grad))
+        used_exact = used[0]
         step = gauge(problem, step)
         remove_rigid = rigid_fit(x, problem)
         free, spin = remove_rigid(step)
@@ -797,7 +822,7 @@ class Newton:
             alpha, value, _, _ = jax.lax.while_loop(grow, double, (alpha, value, True, 0))
         end = point(alpha)
         u = jnp.where(unpin, reframe(end, problem), end) - problem.start
-        return u, value, accepted, full, noise
+        return u, value, accepted, full, noise, used_exact
 
     def _acceleration(self, s: NewtonState, problem: Problem, x, velocity: Array, solve) -> Array:
         """``a = -H^-1 J^T W r''[v, v]`` at positions ``x`` (zero when too large or not
@@ -820,22 +845,22 @@ class Newton:
 
     def step(self, s: NewtonState, problem: Problem) -> NewtonState:
         """One Newton iteration (pure)."""
-        # one attempt per iteration (one factorization compiled): an exact-Hessian attempt that
-        # fails costs an iteration and hands over to the convex part
-        u, value, accepted, full, noise = self._attempt(s, problem, s.exact)
-        retry = s.exact & ~accepted
+        # one attempt per iteration (one factorization compiled): a rejected exact attempt costs
+        # an iteration and hands over to the convex part (on the host, one that does not factor
+        # hands over within the iteration: see ``_factor``)
+        u, value, accepted, full, noise, used_exact = self._attempt(s, problem, s.exact)
+        exact_ran = s.exact & used_exact
+        retry = exact_ran & ~accepted  # rejected, and no convex step tried yet
+        rejected = retry | (s.exact & ~used_exact)
         new_value, grad, gmax = _value_and_grad(u, problem, s.reference)
         finite = accepted & jnp.isfinite(new_value) & jnp.isfinite(gmax)
         take = finite
         stalls = jnp.where(take, 0, jnp.where(retry, s.stalls, s.stalls + 1))
-        # a rejected exact attempt costs an iteration: after the n-th in a row, wait for
-        # 2^n - 1 full convex steps (at most 15) before the next
-        failures = jnp.where(retry, s.failures + 1, jnp.where(take & s.exact, 0, s.failures))
-        cooldown = jnp.where(
-            retry,
-            2 ** jnp.minimum(failures, 4) - 1,
-            jnp.where(take & full, jnp.maximum(s.cooldown - 1, 0), s.cooldown),
-        )
+        # after the n-th rejected exact attempt in a row, wait for 2^n - 1 full convex steps (at
+        # most 15) before the next
+        failures = jnp.where(rejected, s.failures + 1, jnp.where(take & exact_ran, 0, s.failures))
+        cooldown = jnp.where(rejected, 2 ** jnp.minimum(failures, 4) - 1, s.cooldown)
+        cooldown = jnp.where(take & full, jnp.maximum(cooldown - 1, 0), cooldown)
         progress = s.progress.update(take, gmax, new_value, noise)
         converged = take & has_converged(gmax, s.grad_max0, problem, s.grad_max)
         stalled = (stalls >= self.max_stalls) | (progress.since_best >= self.patience)
@@ -862,7 +887,7 @@ class Newton:
             grad_max0=s.grad_max0,
             status=status,
             mu=mu,
-            exact=take & (s.exact | (full & (cooldown == 0))),
+            exact=take & (exact_ran | (full & (cooldown == 0))),
             stalls=stalls,
             failures=failures.astype(s.failures.dtype),
             cooldown=cooldown.astype(s.cooldown.dtype),
