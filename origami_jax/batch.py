@@ -416,7 +416,8 @@ def fold_batch(
       A list in input order. A problem's result equals folding it alone (to the rounding of a
       different summation order), though its iteration count can be higher: a batch member
       spends an iteration on each exact-Hessian attempt that does not factor, where a single
-      Newton fold hands over to the convex part within the iteration (the same steps). When
+      Newton fold hands over to the convex part within the iteration (the same steps; so at
+      an iteration or time limit the two can stop at different points). When
       interrupted (KeyboardInterrupt), the list holds the results of the problems already
       done and ``None`` for the rest, with a warning.
     """

@@ -108,28 +108,62 @@ def test_newton_sparse_and_dense_agree(monkeypatch):
 def test_an_exact_hessian_that_does_not_factor_hands_over_within_the_iteration(linear_solver):
     """Asked for the exact Hessian where it is indefinite (a sheet shrunk by a fifth: every bar
     compressed, so its transverse stiffness is negative), the factorization takes the convex
-    part's step at once and says so; where the exact Hessian factors it is used."""
+    part's step at once and says so; where the exact Hessian factors it is used. Vmapped (the
+    cond runs both branches), the same per member, and no host factorization is left kept."""
+    from origami_jax.solvers import hostsparse
+
     cp = patterns.miura_ori(3, 3)
     mesh = cp.mesh
     solver = Newton(linear_solver=linear_solver)
 
-    @jax.jit
     def newton_step(s, problem, exact):
-        solve, used = solver._factor(s, problem, exact, keep=False)
+        solve, used = solver._factor(s, problem, exact, keep=True)
         step, ok = solve(-s.grad)
-        return step, ok, used[0]
+        again, _ = solve(-2 * s.grad)  # the second solve releases a kept host factorization
+        return step, ok, used[0], again
 
-    steps = {}
+    one = jax.jit(newton_step)
+    steps, states, problems = {}, [], []
     for name, start in (("shrunk", 0.8 * mesh.vertices), ("flat", mesh.vertices)):
         problem = make_problem(mesh, make_structure(mesh), make_params(cp), start, 1e-9)
         problem = prepare(solver, problem, mesh)
         s = solver.init(problem)
+        states.append(s)
+        problems.append(problem)
         for exact in (True, False):
-            step, ok, used = newton_step(s, problem, jnp.asarray(exact))
+            step, ok, used, again = one(s, problem, jnp.asarray(exact))
             assert bool(ok) and bool(used) == (exact and name == "flat"), (name, exact)
+            np.testing.assert_allclose(again, 2 * step, rtol=1e-9, atol=1e-12)
             steps[name, exact] = np.asarray(step)
     np.testing.assert_array_equal(steps["shrunk", True], steps["shrunk", False])
     assert np.max(np.abs(steps["flat", True] - steps["flat", False])) > 1e-3
+    both = jax.tree.map(lambda *a: jnp.stack(a), *states)
+    start = jnp.stack([p.start for p in problems])
+    problem = dataclasses.replace(problems[0], start=start)
+    axes = dataclasses.replace(jax.tree.map(lambda _: None, problem), start=0)
+    vmapped = jax.jit(jax.vmap(newton_step, in_axes=(0, axes, None)))
+    step, ok, used, _ = vmapped(both, problem, jnp.asarray(True))
+    assert np.all(np.asarray(ok)) and np.asarray(used).tolist() == [False, True]
+    np.testing.assert_allclose(step[0], steps["shrunk", False], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(step[1], steps["flat", True], rtol=1e-9, atol=1e-12)
+    assert not hostsparse._KEPT
+
+
+def test_the_hand_over_takes_the_same_steps_as_an_iteration_spent():
+    """A fold that hands failed exact attempts over within the iteration (a single fold) ends
+    where one that spends an iteration on each (a batch's layout) does, in fewer iterations."""
+    cp = patterns.miura_ori(10, 10)
+    mesh = cp.mesh
+    solver = Newton()
+    problem = make_problem(mesh, make_structure(mesh), make_params(cp), None, 1e-10)
+    single = prepare(solver, problem, mesh)
+    batch = dataclasses.replace(single, aux=dataclasses.replace(single.aux, batched=True))
+    run = jax.jit(lambda p: solver.run(solver.init(p), p, jnp.int32(200)))
+    a, b = run(single), run(batch)
+    assert int(a.status) == int(b.status) == Status.CONVERGED
+    assert int(a.iteration) < int(b.iteration)
+    scale = float(np.ptp(mesh.vertices))
+    np.testing.assert_allclose(positions(single, a.u), positions(batch, b.u), atol=1e-10 * scale)
 
 
 def test_host_sparse_backends_agree_and_fail_cleanly(monkeypatch):

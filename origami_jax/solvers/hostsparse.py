@@ -155,10 +155,14 @@ def _finish(x: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, bool]:
     return (x if ok else np.zeros_like(x)).astype(rhs.dtype), ok
 
 
-def factor_solve(indptr, indices, data, rhs, keep: bool = False):
+def factor_solve(indptr, indices, data, rhs, active=True, keep: bool = False):
     """``(x, ok, token)``: the solution of ``A x = rhs`` and, with ``keep``, a token of the
-    factorization for :func:`resolve` (``0`` when none is kept)."""
+    factorization for :func:`resolve` (``0`` when none is kept). Not ``active``: nothing is
+    factored, zeros and ``ok=False`` (a ``lax.cond`` branch that ``vmap`` runs for every member,
+    selected only for some)."""
     rhs = np.asarray(rhs)
+    if not np.all(active):
+        return np.zeros_like(rhs), np.asarray(False), np.asarray(0, np.int32)
     with _LOCK:
         return _factor_solve(indptr, indices, data, rhs, keep)
 

@@ -13,9 +13,10 @@ Hessian can be indefinite, so the method works with two matrices:
   accepts whole; otherwise the iteration falls back to the convex part. An exact Hessian that
   does not factor (not positive definite) hands over to the convex part within the same
   iteration (an iteration less each: Miura-ori 30 x 30 14 -> 11, 100 x 100 20 -> 17; not in
-  ``fold_batch``, where vmap would compute both every iteration). After the n-th rejected
-  exact attempt in a row the next waits for 2^n - 1 full convex steps (at most 15): on
-  box.fold, where they alternated, that took 259 iterations down to 59.
+  ``fold_batch``, where vmap would assemble both every iteration; under a user's ``vmap`` both
+  are assembled, and only the members that need it factor the second). After the n-th
+  rejected exact attempt in a row the next waits for 2^n - 1 full convex steps (at most 15):
+  on box.fold, where they alternated, that took 259 iterations down to 59.
 
 A Levenberg-Marquardt shift ``mu * diag(H)`` (``mu`` from ``mu_min``, grown 10x, from at least
 1e-10, whenever no step is found, and shrunk 10x with every step taken) keeps the system
@@ -523,7 +524,7 @@ def _one_member_at_a_time(fn):
         if not any(in_batched):  # only tangents batched (jacfwd): nothing to split
             return fn(*args), False
         args = tuple(
-            a if batched else jnp.broadcast_to(a, (axis_size, *a.shape))
+            a if batched else jnp.broadcast_to(a, (axis_size, *jnp.shape(a)))
             for a, batched in zip(args, in_batched, strict=True)
         )
         return jax.lax.map(lambda pair: fn(*pair), args), True
@@ -532,6 +533,15 @@ def _one_member_at_a_time(fn):
 
 
 _dense_factor = _one_member_at_a_time(jnp.linalg.cholesky)
+
+
+@_one_member_at_a_time
+def _dense_factor_if(matrix: Array, active: Array) -> Array:
+    """The Cholesky factor of ``matrix``, or NaN without factoring it when not ``active`` (one
+    member at a time, so the ``lax.cond`` stays one under ``vmap``)."""
+    return jax.lax.cond(active, jnp.linalg.cholesky, lambda m: jnp.full_like(m, jnp.nan), matrix)
+
+
 _dense_solve_factored = _one_member_at_a_time(
     lambda factor, rhs: jax.scipy.linalg.cho_solve((factor, True), rhs)
 )
@@ -672,11 +682,14 @@ class Newton:
                 s.mu * diag + floor
             )
 
-        # first(values, b) -> (solution, ok, handle): factor and solve; again(handle, b) solves
-        # with the same factorization (dense: the Cholesky factor; sparse: the host's token)
+        # first(values, b, active) -> (solution, ok, handle): factor and solve (not ``active``:
+        # a cond branch that vmap runs but does not select, so nothing is factored);
+        # again(handle, b) solves with the same factorization (dense: the Cholesky factor;
+        # sparse: the host's token)
         if layout.sparse:
 
-            def first(values, b):
+            def first(values, b, active):
+                active = jnp.asarray(True) if active is None else active
                 return jax.pure_callback(
                     functools.partial(hostsparse.factor_solve, keep=keep),
                     (
@@ -688,6 +701,7 @@ class Newton:
                     layout.indices,
                     values,
                     b,
+                    active,
                     vmap_method="sequential",
                 )
 
@@ -702,8 +716,12 @@ class Newton:
 
         else:
 
-            def first(values, b):
-                chol = _dense_factor(values.reshape(layout.size, layout.size))
+            def first(values, b, active):
+                matrix = values.reshape(layout.size, layout.size)
+                if active is None:
+                    chol = _dense_factor(matrix)
+                else:
+                    chol = _dense_factor_if(matrix, active)
                 sol = _dense_solve_factored(chol, b)
                 return sol, jnp.all(jnp.isfinite(sol)), chol
 
@@ -717,10 +735,14 @@ class Newton:
                 sol = again(handle[0], b)
                 ok = jnp.all(jnp.isfinite(sol))
             else:
-                sol, ok, h = found = first(shifted(exact), b)
+                sol, ok, h = found = first(shifted(exact), b, None)
                 if not layout.batched and not (isinstance(exact, bool) and not exact):
                     fail = jnp.asarray(exact) & ~ok
-                    sol, ok, h = jax.lax.cond(fail, lambda: first(shifted(False), b), lambda: found)
+                    # vmapped, the cond runs both branches for every member: ``fail`` keeps
+                    # the factorization to the members that select it
+                    sol, ok, h = jax.lax.cond(
+                        fail, lambda: first(shifted(False), b, fail), lambda: found
+                    )
                     used.append(jnp.asarray(exact) & ~fail)
                 else:
                     used.append(jnp.asarray(exact))
@@ -845,9 +867,9 @@ class Newton:
 
     def step(self, s: NewtonState, problem: Problem) -> NewtonState:
         """One Newton iteration (pure)."""
-        # one attempt per iteration (one factorization compiled): a rejected exact attempt costs
-        # an iteration and hands over to the convex part (on the host, one that does not factor
-        # hands over within the iteration: see ``_factor``)
+        # one step tried per iteration: an exact Hessian that does not factor hands over to the
+        # convex part within it (see ``_factor``); an exact step the line search rejects costs
+        # the iteration, and the next one is convex
         u, value, accepted, full, noise, used_exact = self._attempt(s, problem, s.exact)
         exact_ran = s.exact & used_exact
         retry = exact_ran & ~accepted  # rejected, and no convex step tried yet
