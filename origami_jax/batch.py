@@ -229,8 +229,7 @@ def _padded(member: _Member, to: BatchSizes, solver: Solver) -> Problem:
 def _padded_aux(solver: Solver, member: _Member, problem: Problem, to: BatchSizes):
     if isinstance(solver, Newton):
         st = problem.structure
-        layout = layout_arrays(np.asarray(st.bars), np.asarray(st.hinges), to.vertices, None)
-        return replace(layout, batched=True)
+        return layout_arrays(np.asarray(st.bars), np.asarray(st.hinges), to.vertices, None)
     if isinstance(solver, Dynamics) and solver.mass != "unit":
         return _pad_rows(lumped_mass(member.pattern.mesh), to.vertices, 1.0)
     return None
@@ -414,10 +413,11 @@ def fold_batch(
 
     Returns:
       A list in input order. A problem's result equals folding it alone (to the rounding of a
-      different summation order), though its iteration count can be higher: a batch member
-      spends an iteration on each exact-Hessian attempt that does not factor, where a single
-      Newton fold hands over to the convex part within the iteration (the same steps; so at
-      an iteration or time limit the two can stop at different points). When
+      different summation order). Above Newton's ``dense_max`` (200) vertices, where a single
+      fold solves sparse, its iteration count can be lower than the batch member's: it hands
+      an exact-Hessian attempt that does not factor over to the convex part within the
+      iteration, where the member spends one (the same steps; so at an iteration or time
+      limit the two can stop at different points). When
       interrupted (KeyboardInterrupt), the list holds the results of the problems already
       done and ``None`` for the rest, with a warning.
     """

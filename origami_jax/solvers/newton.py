@@ -12,11 +12,11 @@ Hessian can be indefinite, so the method works with two matrices:
   (the quadratic region), and kept as long as it gives a descent step that the line search
   accepts whole; otherwise the iteration falls back to the convex part. An exact Hessian that
   does not factor (not positive definite) hands over to the convex part within the same
-  iteration (an iteration less each: Miura-ori 30 x 30 14 -> 11, 100 x 100 20 -> 17; not in
-  ``fold_batch``, where vmap would assemble both every iteration; under a user's ``vmap`` both
-  are assembled, and only the members that need it factor the second). After the n-th
-  rejected exact attempt in a row the next waits for 2^n - 1 full convex steps (at most 15):
-  on box.fold, where they alternated, that took 259 iterations down to 59.
+  iteration when it is factored on the host (sparse, large patterns: an iteration less each,
+  Miura-ori 30 x 30 14 -> 11, 100 x 100 20 -> 17); dense, the failed attempt costs the
+  iteration. After the n-th rejected exact attempt in a row the next waits for 2^n - 1 full
+  convex steps (at most 15): on box.fold, where they alternated, that took 259 iterations down
+  to 59.
 
 A Levenberg-Marquardt shift ``mu * diag(H)`` (``mu`` from ``mu_min``, grown 10x, from at least
 1e-10, whenever no step is found, and shrunk 10x with every step taken) keeps the system
@@ -107,7 +107,7 @@ __all__ = [
         "piece",
         "plan",
     ],
-    meta_fields=["batched"],
+    meta_fields=[],
 )
 @dataclass(frozen=True)
 class HessianLayout:
@@ -129,7 +129,7 @@ class HessianLayout:
 
     ``plan``: for a dense layout shared by a vmapped batch of one topology (``fold_batch``),
     the :class:`~origami_jax.solvers.blocksparse.BlockPlan` that solves all members at once;
-    ``None`` otherwise. ``batched``: the layout of a vmapped batch (static).
+    ``None`` otherwise.
     """
 
     order: Array
@@ -141,7 +141,6 @@ class HessianLayout:
     block_entries: Array
     piece: Array
     plan: BlockPlan | None = None
-    batched: bool = False
 
     @property
     def sparse(self) -> bool:
@@ -524,7 +523,7 @@ def _one_member_at_a_time(fn):
         if not any(in_batched):  # only tangents batched (jacfwd): nothing to split
             return fn(*args), False
         args = tuple(
-            a if batched else jnp.broadcast_to(a, (axis_size, *jnp.shape(a)))
+            a if batched else jnp.broadcast_to(a, (axis_size, *a.shape))
             for a, batched in zip(args, in_batched, strict=True)
         )
         return jax.lax.map(lambda pair: fn(*pair), args), True
@@ -533,13 +532,6 @@ def _one_member_at_a_time(fn):
 
 
 _dense_factor = _one_member_at_a_time(jnp.linalg.cholesky)
-
-
-@_one_member_at_a_time
-def _dense_factor_if(matrix: Array, active: Array) -> Array:
-    """The Cholesky factor of ``matrix``, or NaN without factoring it when not ``active`` (one
-    member at a time, so the ``lax.cond`` stays one under ``vmap``)."""
-    return jax.lax.cond(active, jnp.linalg.cholesky, lambda m: jnp.full_like(m, jnp.nan), matrix)
 
 
 _dense_solve_factored = _one_member_at_a_time(
@@ -660,11 +652,12 @@ class Newton:
         step, the second, only with ``keep``, reuses the factorization), and ``used``, a list
         that holds, once the first call has run, whether the exact Hessian was factored.
 
-        An exact Hessian that does not factor hands over to the convex part within the same
-        call, so a failed exact attempt costs its factorization (which stops at the first
-        pivot that is not positive) but not a whole iteration; except in a batch
-        (``layout.batched``, :func:`~origami_jax.fold_batch`), where vmap would turn the
-        ``lax.cond`` into computing both every time: there ``used`` is ``exact``."""
+        On the host (sparse layouts, above ``dense_max`` vertices), an exact Hessian that does
+        not factor hands over to the convex part within the same call, so a failed exact
+        attempt costs its factorization (which stops at the first pivot that is not positive)
+        but not a whole iteration. Dense (small patterns, and every ``fold_batch``), ``used`` is
+        ``exact``: there an iteration costs milliseconds while the second branch would add
+        0.3 to 0.8 s to every compile, and vmap would run both branches."""
         layout: HessianLayout = problem.aux
         x = positions(problem, s.u)
         if layout.plan is not None:
@@ -682,74 +675,67 @@ class Newton:
                 s.mu * diag + floor
             )
 
-        # first(values, b, active) -> (solution, ok, handle): factor and solve (not ``active``:
-        # a cond branch that vmap runs but does not select, so nothing is factored);
-        # again(handle, b) solves with the same factorization (dense: the Cholesky factor;
-        # sparse: the host's token)
-        if layout.sparse:
+        def ordered(rhs):
+            return jnp.zeros(layout.size, x.dtype).at[layout.order].set(rhs.reshape(-1))
 
-            def first(values, b, active):
-                active = jnp.asarray(True) if active is None else active
-                return jax.pure_callback(
-                    functools.partial(hostsparse.factor_solve, keep=keep),
-                    (
-                        jax.ShapeDtypeStruct(b.shape, b.dtype),
-                        jax.ShapeDtypeStruct((), jnp.bool_),
-                        jax.ShapeDtypeStruct((), jnp.int32),
-                    ),
-                    layout.indptr,
-                    layout.indices,
-                    values,
-                    b,
-                    active,
-                    vmap_method="sequential",
-                )
+        def unordered(sol):
+            return sol[layout.order].reshape(x.shape)
 
-            def again(token, b):
-                return jax.pure_callback(
+        if not layout.sparse:
+            chol = _dense_factor(shifted(exact).reshape(layout.size, layout.size))
+
+            def dense(rhs):
+                sol = unordered(_dense_solve_factored(chol, ordered(rhs)))
+                return sol, jnp.all(jnp.isfinite(sol))
+
+            return dense, [exact]
+
+        def first(values, b, active):
+            """Factor (kept with ``keep``) and solve on the host: ``(solution, ok, token)``.
+            Not ``active``, nothing is factored: a cond branch that vmap runs for every member
+            but selects for some."""
+            return jax.pure_callback(
+                functools.partial(hostsparse.factor_solve, keep=keep),
+                (
+                    jax.ShapeDtypeStruct(b.shape, b.dtype),
+                    jax.ShapeDtypeStruct((), jnp.bool_),
+                    jax.ShapeDtypeStruct((), jnp.int32),
+                ),
+                layout.indptr,
+                layout.indices,
+                values,
+                b,
+                active,
+                vmap_method="sequential",
+            )
+
+        token, used = [], []
+
+        def sparse(rhs):
+            b = ordered(rhs)
+            if token:
+                sol = jax.pure_callback(
                     hostsparse.resolve,
                     jax.ShapeDtypeStruct(b.shape, b.dtype),
-                    token,
+                    token[0],
                     b,
                     vmap_method="sequential",
                 )
-
-        else:
-
-            def first(values, b, active):
-                matrix = values.reshape(layout.size, layout.size)
-                if active is None:
-                    chol = _dense_factor(matrix)
-                else:
-                    chol = _dense_factor_if(matrix, active)
-                sol = _dense_solve_factored(chol, b)
-                return sol, jnp.all(jnp.isfinite(sol)), chol
-
-            again = _dense_solve_factored
-
-        handle, used = [], []
-
-        def solve(rhs):
-            b = jnp.zeros(layout.size, x.dtype).at[layout.order].set(rhs.reshape(-1))
-            if handle:
-                sol = again(handle[0], b)
-                ok = jnp.all(jnp.isfinite(sol))
+                sol = unordered(sol)
+                return sol, jnp.all(jnp.isfinite(sol))
+            sol, ok, t = found = first(shifted(exact), b, jnp.asarray(True))
+            if isinstance(exact, bool) and not exact:
+                used.append(jnp.asarray(False))
             else:
-                sol, ok, h = found = first(shifted(exact), b, None)
-                if not layout.batched and not (isinstance(exact, bool) and not exact):
-                    fail = jnp.asarray(exact) & ~ok
-                    # vmapped, the cond runs both branches for every member: ``fail`` keeps
-                    # the factorization to the members that select it
-                    sol, ok, h = jax.lax.cond(
-                        fail, lambda: first(shifted(False), b, fail), lambda: found
-                    )
-                    used.append(jnp.asarray(exact) & ~fail)
-                else:
-                    used.append(jnp.asarray(exact))
-                handle.append(h)
-            return sol[layout.order].reshape(x.shape), ok
+                fail = jnp.asarray(exact) & ~ok
+                sol, ok, t = jax.lax.cond(
+                    fail, lambda: first(shifted(False), b, fail), lambda: found
+                )
+                used.append(jnp.asarray(exact) & ~fail)
+            token.append(t)
+            return unordered(sol), ok
 
-        return solve, used
+        return sparse, used
 
     def _attempt(self, s: NewtonState, problem: Problem, exact: Array):
         """Step, limit, backtracking and expansion: (u, energy, accepted, full step taken,
@@ -867,9 +853,9 @@ class Newton:
 
     def step(self, s: NewtonState, problem: Problem) -> NewtonState:
         """One Newton iteration (pure)."""
-        # one step tried per iteration: an exact Hessian that does not factor hands over to the
-        # convex part within it (see ``_factor``); an exact step the line search rejects costs
-        # the iteration, and the next one is convex
+        # one step tried per iteration: a rejected exact attempt costs the iteration and the
+        # next one is convex (but on the host an exact Hessian that does not factor hands over
+        # within it: see ``_factor``)
         u, value, accepted, full, noise, used_exact = self._attempt(s, problem, s.exact)
         exact_ran = s.exact & used_exact
         retry = exact_ran & ~accepted  # rejected, and no convex step tried yet
