@@ -417,9 +417,9 @@ def fold_batch(
       fold solves sparse, its iteration count can be lower than the batch member's: it hands
       an exact-Hessian attempt that does not factor over to the convex part within the
       iteration, where the member spends one (the same steps; so at an iteration or time
-      limit the two can stop at different points). When
-      interrupted (KeyboardInterrupt), the list holds the results of the problems already
-      done and ``None`` for the rest, with a warning.
+      limit the two can stop at different points). When interrupted (KeyboardInterrupt),
+      the list holds the results of the problems already done and ``None`` for the rest,
+      with a warning.
     """
     one_pattern = isinstance(patterns, CreasePattern)
     if one_pattern:

@@ -532,8 +532,6 @@ def _one_member_at_a_time(fn):
 
 
 _dense_factor = _one_member_at_a_time(jnp.linalg.cholesky)
-
-
 _dense_solve_factored = _one_member_at_a_time(
     lambda factor, rhs: jax.scipy.linalg.cho_solve((factor, True), rhs)
 )
