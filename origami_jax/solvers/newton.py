@@ -722,14 +722,9 @@ class Newton:
                 sol = unordered(sol)
                 return sol, jnp.all(jnp.isfinite(sol))
             sol, ok, t = found = first(shifted(exact), b, jnp.asarray(True))
-            if isinstance(exact, bool) and not exact:
-                used.append(jnp.asarray(False))
-            else:
-                fail = jnp.asarray(exact) & ~ok
-                sol, ok, t = jax.lax.cond(
-                    fail, lambda: first(shifted(False), b, fail), lambda: found
-                )
-                used.append(jnp.asarray(exact) & ~fail)
+            fail = jnp.asarray(exact) & ~ok
+            sol, ok, t = jax.lax.cond(fail, lambda: first(shifted(False), b, fail), lambda: found)
+            used.append(jnp.asarray(exact) & ~fail)
             token.append(t)
             return unordered(sol), ok
 
