@@ -5,6 +5,7 @@
     python benchmarks/run.py --part stiffness   # only the stiffness sweep
     python benchmarks/run.py --part files       # every file under ../shared/patterns
     python benchmarks/run.py --part batch       # fold_batch against a loop (benchmarks/batch.py)
+    python benchmarks/run.py --part linear      # Newton's systems: direct vs PCG (linear.py)
 
 Cases: the seed's scene, Miura-ori 10 x 10, 30 x 30 and 100 x 100, a Yoshimura, a Kresling, and
 every FOLD file under ../shared/patterns that loads (skipped when that folder is absent); the
@@ -117,6 +118,7 @@ PARTS = {
     "stiffness": (stiffness_cases, "stiffness_", False, 30.0),
     "files": (file_cases, "files_", False, 60.0),
     "batch": (None, "batch_", True, None),  # benchmarks/batch.py
+    "linear": (None, "linear_", True, None),  # benchmarks/linear.py
 }
 
 
@@ -175,11 +177,10 @@ def main(argv=None) -> int:
         if args.part != part:
             continue
         max_time = max_time if args.max_time is None else args.max_time
-        if part == "batch":
+        if part in ("batch", "linear"):  # their own scripts
             sys.path.insert(0, str(Path(__file__).parent))
-            import batch
-
-            batch.main(out, quick=args.quick)
+            module = __import__(part)
+            module.main(out, quick=args.quick)
             continue
         if part == "files":
             summary = run_files(make_cases(args.quick), max_time)
