@@ -29,11 +29,12 @@ from pathlib import Path
 os.environ.setdefault("JAX_ENABLE_X64", "1")
 
 import jax  # noqa: E402
+from cores import usable_cores  # noqa: E402 (benchmarks/, the script's folder)
 
 jax.config.update("jax_enable_x64", True)
 # one JAX device per core: fold_batch splits its slots across them and they run in parallel
 # (XLA runs one device's small batched kernels on about one core)
-jax.config.update("jax_num_cpu_devices", os.cpu_count() or 1)
+jax.config.update("jax_num_cpu_devices", usable_cores())
 
 import numpy as np  # noqa: E402
 
@@ -205,7 +206,7 @@ def write(rows: list[dict], out: Path) -> None:
         writer.writerows(rows)
     device = jax.devices()[0]
     lines = [
-        f"Measured {time.strftime('%Y-%m-%d')} on {os.cpu_count()} cores, jax {jax.__version__},"
+        f"Measured {time.strftime('%Y-%m-%d')} on {usable_cores()} cores, jax {jax.__version__},"
         f" {device.platform}: {device.device_kind}; float64. Batch: one fold_batch call (compile"
         " excluded); loop: fold() one by one on 64 of them (compiled beforehand).",
         "",

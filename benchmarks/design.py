@@ -30,6 +30,7 @@ from pathlib import Path
 os.environ.setdefault("JAX_ENABLE_X64", "1")
 
 import jax  # noqa: E402
+from cores import usable_cores  # noqa: E402 (benchmarks/, the script's folder)
 
 jax.config.update("jax_enable_x64", True)
 
@@ -123,7 +124,7 @@ def main() -> None:
         "# Inverse design: gradient cost and accuracy",
         "",
         f"float64, tol {TOL:g}, median of {REPEATS} runs after compilation; "
-        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"{platform.processor() or platform.machine()}, {usable_cores()} cores, "
         f"jax {jax.__version__} on {jax.default_backend()}. "
         "Gradient: `value_and_grad` of a random linear loss of the positions, with respect to "
         "every parameter. Warm: started from the equilibrium.",

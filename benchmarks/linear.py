@@ -36,6 +36,7 @@ from pathlib import Path
 os.environ.setdefault("JAX_ENABLE_X64", "1")
 
 import jax  # noqa: E402
+from cores import usable_cores  # noqa: E402 (benchmarks/, the script's folder)
 
 jax.config.update("jax_enable_x64", True)
 
@@ -250,7 +251,7 @@ def plot(rows: list[dict], out: Path) -> None:
 def main(out: Path, quick: bool = False) -> None:
     out.mkdir(parents=True, exist_ok=True)
     machine = (
-        f"{platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}, "
+        f"{platform.machine()}, {usable_cores()} cores, jax {jax.__version__}, "
         f"direct solves: {hostsparse.backend()}"
     )
     rows, folds = [], {}

@@ -41,10 +41,11 @@ from pathlib import Path
 os.environ.setdefault("JAX_ENABLE_X64", "1")
 
 import jax  # noqa: E402
+from cores import usable_cores  # noqa: E402 (benchmarks/, the script's folder)
 
 jax.config.update("jax_enable_x64", True)
 # one JAX device per core, as benchmarks/batch.py (fold() uses the first; fold_batch all)
-jax.config.update("jax_num_cpu_devices", os.cpu_count() or 1)
+jax.config.update("jax_num_cpu_devices", usable_cores())
 
 import numpy as np  # noqa: E402
 
@@ -159,7 +160,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     device = jax.devices()[0]
     machine = (
-        f"{platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}, "
+        f"{platform.machine()}, {usable_cores()} cores, jax {jax.__version__}, "
         f"device {device.platform}: {device.device_kind}, "
         f"sparse Newton solves: {hostsparse.backend()}"
     )
