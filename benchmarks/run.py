@@ -178,8 +178,7 @@ def main(argv=None) -> int:
         if args.part != part:
             continue
         max_time = max_time if args.max_time is None else args.max_time
-        if part in ("batch", "linear"):  # their own scripts
-            sys.path.insert(0, str(Path(__file__).parent))
+        if part in ("batch", "linear"):  # their own scripts, beside this one (on sys.path)
             module = __import__(part)
             module.main(out, quick=args.quick)
             continue
