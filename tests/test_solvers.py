@@ -155,10 +155,11 @@ def test_an_exact_hessian_that_does_not_factor_hands_over_within_the_iteration()
 
 def test_the_hand_over_takes_the_same_steps_as_an_iteration_spent():
     """A sparse fold hands failed exact attempts over within the iteration; a dense one spends
-    an iteration on each: the same end, in fewer iterations (Miura-ori 10 x 10: 12 -> 10)."""
+    an iteration on each: the same end, in fewer iterations (Miura-ori 10 x 10: 12 -> 10; with
+    exact attempts after every full step, as ``convex_rate=0`` makes them)."""
     cp = patterns.miura_ori(10, 10)
-    dense = fold(cp, solver=Newton(linear_solver="dense"), tol=1e-10)
-    sparse = fold(cp, solver=Newton(linear_solver="sparse"), tol=1e-10)
+    dense = fold(cp, solver=Newton(linear_solver="dense", convex_rate=0.0), tol=1e-10)
+    sparse = fold(cp, solver=Newton(linear_solver="sparse", convex_rate=0.0), tol=1e-10)
     assert dense.converged and sparse.converged
     assert sparse.iterations < dense.iterations
     np.testing.assert_allclose(sparse.positions, dense.positions, atol=1e-10 * cp.diameter)
@@ -264,10 +265,17 @@ def test_newton_element_hessians_match_autodiff():
             return assemble(x, problem, ref, exact).reshape(n, n)
 
         full = jax.hessian(lambda y: energy(y.reshape(-1, 3), structure, params, ref))(x.ravel())
-        return assembled(True), full, assembled(False)
+        # vmapped (fold_batch) over traced flags: one branch for all, zero weight where unset
+        mixed = jax.vmap(assembled)(jnp.array([True, False]))
+        neither = jax.vmap(assembled)(jnp.array([False, False]))
+        return assembled(True), full, assembled(False), mixed, neither
 
-    assembled, expected, matrix = matrices(jnp.asarray(x))
+    assembled, expected, matrix, mixed, neither = matrices(jnp.asarray(x))
     np.testing.assert_allclose(assembled, expected, atol=1e-10)
+    np.testing.assert_allclose(mixed[0], assembled, atol=1e-13)
+    for convex in (mixed[1], neither[0], neither[1]):
+        np.testing.assert_allclose(convex, matrix, atol=1e-13)
+    assert np.abs(np.asarray(assembled) - np.asarray(matrix)).max() > 1e-3
     # the convex part is positive semi-definite
     assert np.linalg.eigvalsh(np.asarray(matrix)).min() > -1e-12
 
