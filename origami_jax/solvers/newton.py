@@ -621,7 +621,7 @@ class Newton:
         1,080-1,250 folds/s (7.13 -> 6.92 mean iterations), waterbomb 2 x 2 variants
         unchanged (430-510 -> 530-630 folds/s, 15.2 iterations, noise); single folds of the
         benchmark scenes and shared files kept their status and error, iterations equal or
-        1 to 2 fewer, except Miura-ori 30 x 30 11 -> 14 (100 x 100 17 -> 16).
+        fewer (popupSimple 25 -> 20, 100 x 100 17 -> 16) except Miura-ori 30 x 30 11 -> 14.
       max_linesearch_steps: halvings of the step before an iteration gives up.
       max_stalls: iterations in a row without a step before giving up (STALLED).
       patience: iterations with neither a new lowest energy (lower by more than the energy's
@@ -901,8 +901,9 @@ class Newton:
         stalled = (stalls >= self.max_stalls) | (progress.since_best >= self.patience)
         nonfinite = accepted & ~finite
         status = next_status(converged, ~nonfinite, stalled)
-        # a full convex step that cut the energy to below ``convex_rate`` of its value converges
-        # as fast as the exact Hessian would, without its curvature terms: stay convex
+        # a step (exact or convex) that cut the energy below ``convex_rate`` of its value: near a
+        # zero-residual solution, where the convex part converges as fast without the curvature
+        # terms, so the next iteration is convex
         fast = new_value < self.convex_rate * s.energy
         keep = lambda new, old: jnp.where(take, new, old)  # noqa: E731
         u = keep(u, s.u)
