@@ -322,7 +322,7 @@ def element_blocks(
             out.append(
                 jax.lax.cond(
                     _any_member(exact),
-                    lambda: with_curvature(jnp.where(exact, 1.0, 0.0).astype(dtype)),
+                    lambda: with_curvature(exact.astype(dtype)),
                     lambda: kl * gg,
                 )
             )
