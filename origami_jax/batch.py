@@ -23,12 +23,18 @@ default for a topology with at least :data:`SHARED_TOPOLOGY_MIN` problems in one
 pattern given for many parameter sets); it compiles once per topology instead of per bucket
 (``share_topology`` chooses).
 
-Problems of one compiled shape run in a fixed number of **slots** (``chunk_size``), each call
-one vmapped solve of some iterations in which every member stops on its own tolerance; between
-calls the members that have stopped hand in their results and their slots take the next
-problems of the queue (continuous batching: nobody waits for the slowest member of a fixed
-chunk). With several devices the slots are split across them (``jax.shard_map``). Between
-calls the host shows progress; an interrupted batch (Ctrl-C) returns the problems already done.
+Problems of one compiled shape run in a fixed number of **slots** (``chunk_size``) of one
+compiled loop, every member stopping on its own tolerance. The problems wait in a queue on the
+devices; inside the loop, a few slots at a time, those whose problem has stopped write its
+result out and take the next problem of the queue (continuous batching: no slot waits for the
+slowest member of a chunk, nor for the host). With several devices the slots and the queue are
+split across them (``jax.shard_map``). Each call runs about a tenth of a second of iterations;
+the next one is dispatched before the host reads the results of the last, shows progress and
+hands the finished problems on; an interrupted batch (Ctrl-C) returns the problems already
+done. Few slots suit CPUs (:data:`CPU_SLOTS` per device: one device's slots stay in its
+caches): on 2026-12-04 (``benchmarks/batch.py``, 2 CPU devices, 32 slots) 1,024 Miura-ori
+4 x 4 variants folded at 2,147 folds/s, where slots refilled by the host between calls (256
+of them, the design before) reached 1,086.
 
 Example:
   >>> from origami_jax import fold_batch, patterns
@@ -56,9 +62,9 @@ from origami_jax.fold import (
     HISTORY_FIELDS,
     FoldResult,
     _reason,
-    _sample,
-    compiled,
+    _signature,
     default_tol,
+    measured,
     next_chunk,
 )
 from origami_jax.metrics import METRIC_NAMES
@@ -345,34 +351,22 @@ def compile_count() -> int:
     return _COMPILES[0]
 
 
-def _wrap(devices: list):
-    """vmap over the batch axis; with several devices, each takes a slice of it."""
-
-    def wrap(fn, in_axes):
-        batched = jax.vmap(fn, in_axes=in_axes)
-        if len(devices) == 1:
-            return batched
-        mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
-        spec = jax.sharding.PartitionSpec("batch")
-        in_specs = jax.tree.map(
-            lambda a: spec if a == 0 else jax.sharding.PartitionSpec(),
-            in_axes,
-            is_leaf=lambda a: a is None,
-        )
-        return jax.shard_map(batched, mesh=mesh, in_specs=in_specs, out_specs=spec, check_vma=False)
-
-    return wrap
+# default slots per device: on CPUs few, so that one device's slots stay in its caches (with
+# continuous batching nothing is gained by more); elsewhere (GPUs) many
+CPU_SLOTS = 16
+SLOTS = 256
 
 
 def _chunk_size(requested: int | None, n: int, solver: Solver, to: BatchSizes, devices) -> int:
+    d = len(devices)
     if requested is None:
-        requested = 256
+        requested = d * (CPU_SLOTS if all(x.platform == "cpu" for x in devices) else SLOTS)
         if isinstance(solver, Newton):
             # keep the slots' dense matrices near 256 MB in all
             per_member = (3 * to.vertices) ** 2 * 8
-            requested = max(1, min(256, 2 ** int(np.log2(max(2**28 // per_member, 1)))))
+            fits = 2 ** int(np.log2(max(2**28 // per_member, 1)))
+            requested = max(1, min(requested, fits))
     size = min(int(requested), _pow2(n))
-    d = len(devices)
     return -(-size // d) * d
 
 
@@ -401,9 +395,11 @@ def fold_batch(
       solver: ``"newton"`` (dense Cholesky per member; solved (padded) sizes up to
         ``BATCH_DENSE_MAX`` vertices), ``"lbfgs"``, ``"dynamics"``, or a solver object.
       tol, max_iter, dtype, max_time: as in :func:`~origami_jax.fold`; ``max_time`` applies
-        to each problem, from the moment it enters a slot.
-      chunk_size: problems solved at once, the slots of a compiled solve (default 256, less
-        for large Newton problems); rounded to a multiple of the device count.
+        to each problem from the moment it enters a slot, counted in iterations of the slot
+        loop at the time one took in the last call (so are the results' ``wall_time``).
+      chunk_size: problems solved at once, the slots of a compiled solve (default
+        :data:`CPU_SLOTS` per CPU device, :data:`SLOTS` per other device, fewer for large
+        Newton problems); rounded to a multiple of the device count.
       devices: the devices to split the slots across (default all of JAX's default backend).
       progress: show problems done / total on stderr (default: once a batch has run 2 s).
       share_topology: vmap problems of one topology unpadded with shared index arrays
@@ -520,7 +516,7 @@ def _stack(*trees):
 
 def _host_problem(problems: list[Problem], axes, dtype) -> Problem:
     """The slots' problems stacked along the batch axis (leaves of axis None taken once),
-    floats in ``dtype``: NumPy arrays whose rows :func:`_set_rows` replaces."""
+    floats in ``dtype`` (NumPy arrays)."""
     stacked = jax.tree.map(
         lambda a, *rest: rest[0] if a is None else _stack(*rest),
         axes,
@@ -541,16 +537,6 @@ def _host_problem(problems: list[Problem], axes, dtype) -> Problem:
     )
 
 
-def _set_rows(host: Problem, axes, rows: list[int], problems: list[Problem]) -> None:
-    """Put ``problems`` into slots ``rows`` of the stacked ``host`` problem (batched leaves)."""
-
-    def put(a, stacked, *values):
-        if a is not None:
-            jax.tree.map(lambda s, *v: s.__setitem__(rows, np.stack(v)), stacked, *values)
-
-    jax.tree.map(put, axes, host, *problems, is_leaf=lambda a: a is None)
-
-
 def _to_devices(tree, axes, devices):
     """``tree`` on ``devices``: batched leaves (axis 0) split across them, shared ones (axis
     None) copied to each."""
@@ -568,27 +554,278 @@ def _to_devices(tree, axes, devices):
     return jax.device_put(tree, shardings)
 
 
-def _take_rows(rows: list[int], new, old):
-    """``old`` (host arrays with a batch axis) with ``rows`` taken from ``new``."""
-    take = np.zeros(len(jax.tree.leaves(old)[0]), bool)
-    take[rows] = True
+class _Lanes(NamedTuple):
+    """The slots of a compiled solve: each one's solver state and problem, the queue row of
+    the problem it holds (-1: none) and the iterations it has run since it entered."""
+
+    state: object
+    problem: Problem
+    row: jax.Array
+    age: jax.Array
+
+
+class _Out(NamedTuple):
+    """Per queue row, written when its problem leaves its slot: the end metrics, positions,
+    per-edge fold angles, status, iterations and age (iterations of the compiled loop it ran),
+    the start metrics (``entry``, the first history sample) and whether it is done."""
+
+    metrics: dict
+    x: jax.Array
+    angles: jax.Array
+    status: jax.Array
+    iteration: jax.Array
+    age: jax.Array
+    entry: dict
+    done: jax.Array
+
+
+_SAMPLED = ("fold_angle_error_max", "strain_max", "energy", "grad_norm_rel")
+
+
+def _map_batched(fn, axes, *trees):
+    """``fn`` over the leaves of problem pytrees ``trees`` that carry the batch axis (``axes``
+    0); shared ones (``None``) taken from the first tree."""
     return jax.tree.map(
-        lambda a, b: np.where(take.reshape(-1, *[1] * (a.ndim - 1)), a, b), new, old
+        lambda a, first, *rest: first if a is None else jax.tree.map(fn, first, *rest),
+        axes,
+        *trees,
+        is_leaf=lambda a: a is None,
     )
+
+
+def _select(take: jax.Array, new, old):
+    """Rows of ``new`` where ``take`` (one flag per row), else of ``old``."""
+    return jax.tree.map(
+        lambda a, b: jnp.where(take.reshape(-1, *[1] * (a.ndim - 1)), a, b), new, old
+    )
+
+
+def _queue_fn(solver: Solver, num_edges: int, axes, width: int):
+    """The compiled loop of one device's slots, pure: ``run(lanes, queue, next, count, out,
+    steps, limits)``. Each iteration steps the running slots; once ``width // 2`` slots have
+    stopped (or none runs), up to ``width`` at a time of the stopped ones write their results
+    into ``out`` at their queue rows and of the free ones take the next rows of ``queue``
+    (``next`` (1,) the first not yet taken, ``count`` (1,) how many are real), starting there:
+    gathered ``width`` slots wide, so entries and exits cost a fraction of an iteration. Up to
+    ``steps`` iterations, or until every slot is free and the queue empty. ``limits``:
+    ``(max_iter, time_steps)``: a problem stops (its status still RUNNING) at ``max_iter``
+    iterations or after ``time_steps`` iterations of the loop in its slot (``max_time`` over
+    the measured time of one).
+
+    Returns ``(lanes, next, out, iterations run (1,), end sample of the slots)``.
+    """
+    init = jax.vmap(solver.init, in_axes=(axes,))
+    advance = jax.vmap(solver.run, in_axes=(0, axes, 0))
+    measure = jax.vmap(lambda s, p: measured(s, p, num_edges)[1:], in_axes=(0, axes))
+
+    def run(lanes, queue, nxt, count, out, steps, limits):
+        max_iter, time_steps = limits
+        size, slots = out.done.shape[0], lanes.row.shape[0]
+
+        def running(lanes):
+            s = lanes.state
+            going = (s.status == Status.RUNNING) & (s.iteration < max_iter)
+            return (lanes.row >= 0) & going & (lanes.age < time_steps)
+
+        def pick(flags):
+            """Up to ``width`` slots where ``flags``: their indices (``slots``: none), clipped."""
+            at = jnp.nonzero(flags, size=width, fill_value=slots)[0]
+            return at, jnp.minimum(at, slots - 1)
+
+        def put(buffer, at, value):  # rows ``at`` of ``buffer`` (out of range: dropped)
+            return buffer.at[at].set(value.astype(buffer.dtype), mode="drop")
+
+        def record(lanes, out, stop):
+            at, lane = pick(stop)
+            state = jax.tree.map(lambda a: a[lane], lanes.state)
+            m, x, angles = measure(state, _map_batched(lambda a: a[lane], axes, lanes.problem))
+            rows = jnp.where(at < slots, lanes.row[lane], size)
+            out = _Out(
+                metrics={k: put(out.metrics[k], rows, m[k]) for k in out.metrics},
+                x=put(out.x, rows, x),
+                angles=put(out.angles, rows, angles),
+                status=put(out.status, rows, state.status),
+                iteration=put(out.iteration, rows, state.iteration),
+                age=put(out.age, rows, lanes.age[lane]),
+                entry=out.entry,
+                done=put(out.done, rows, jnp.ones(width, bool)),
+            )
+            return lanes._replace(row=put(lanes.row, at, jnp.full(width, -1))), out
+
+        def enter(lanes, nxt, out):
+            at, _ = pick(lanes.row < 0)
+            take = (at < slots) & (jnp.arange(width) < count[0] - nxt[0])
+            at = jnp.where(take, at, slots)
+            rows = jnp.where(take, nxt[0] + jnp.arange(width, dtype=jnp.int32), size)
+            problem = _map_batched(lambda q: q[jnp.minimum(rows, size - 1)], axes, queue)
+            fresh = init(problem)
+            m, _, _ = measure(fresh, problem)
+            lanes = _Lanes(
+                state=jax.tree.map(lambda a, b: put(a, at, b), lanes.state, fresh),
+                problem=_map_batched(lambda a, b: put(a, at, b), axes, lanes.problem, problem),
+                row=put(lanes.row, at, rows),
+                age=put(lanes.age, at, jnp.zeros(width)),
+            )
+            entry = {k: put(out.entry[k], rows, m[k]) for k in out.entry}
+            return lanes, nxt + jnp.sum(take, dtype=jnp.int32), out._replace(entry=entry)
+
+        def stopped(lanes):
+            return (lanes.row >= 0) & ~running(lanes)
+
+        def settle_once(carry):
+            lanes, nxt, out = carry
+            stop = stopped(lanes)
+            lanes, out = jax.lax.cond(
+                jnp.any(stop), record, lambda l, o, s: (l, o), lanes, out, stop
+            )
+            return jax.lax.cond(
+                jnp.any(lanes.row < 0) & (nxt[0] < count[0]),
+                enter,
+                lambda *c: c,
+                lanes,
+                nxt,
+                out,
+            )
+
+        def unsettled(carry):
+            lanes, nxt, _ = carry
+            return jnp.any(stopped(lanes)) | (jnp.any(lanes.row < 0) & (nxt[0] < count[0]))
+
+        def settle(carry):
+            return jax.lax.while_loop(unsettled, settle_once, carry)
+
+        def body(carry):
+            k, lanes, nxt, out = carry
+            # the slots' problems stay fixed until the next settle: as a constant of the inner
+            # loop (not carried), what depends on them alone is computed once (carried, an
+            # iteration cost about a fifth more)
+            problem, row = lanes.problem, lanes.row
+
+            def due(state, age):
+                lanes = _Lanes(state, problem, row, age)
+                waiting = jnp.sum(stopped(lanes)) + jnp.minimum(jnp.sum(row < 0), count[0] - nxt[0])
+                return (2 * waiting >= width) | ~jnp.any(running(lanes))
+
+            def more_steps(c):
+                j, state, age = c
+                return (j < steps) & ~due(state, age)
+
+            def step(c):
+                j, state, age = c
+                go = running(_Lanes(state, problem, row, age)).astype(jnp.int32)
+                return j + 1, advance(state, problem, go), age + go
+
+            k, state, age = jax.lax.while_loop(more_steps, step, (k, lanes.state, lanes.age))
+            lanes, nxt, out = settle((lanes._replace(state=state, age=age), nxt, out))
+            return k, lanes, nxt, out
+
+        def more(carry):
+            k, lanes, _, _ = carry
+            return (k < steps) & jnp.any(lanes.row >= 0)
+
+        lanes, nxt, out = settle((lanes, nxt, out))
+        k, lanes, nxt, out = jax.lax.while_loop(more, body, (jnp.int32(0), lanes, nxt, out))
+        m, _, _ = measure(lanes.state, lanes.problem)
+        s = lanes.state
+        sample = {**{key: m[key] for key in _SAMPLED}, "iteration": s.iteration}
+        sample.update(row=lanes.row, age=lanes.age)
+        return lanes, nxt, out, k[None], sample
+
+    return run
+
+
+# a round of the queue holds up to this many problems per slot, and about this many bytes of
+# problems; a larger group runs in several rounds (each ends with its slots draining)
+_QUEUE_PER_SLOT = 8
+_QUEUE_BYTES = 2**26
+_INT32_MAX = 2**31 - 1
+_QUEUE_FNS: dict = {}
+_INITS: dict = {}
+
+
+def _sharded(fn, devices: list, in_axes: tuple, out_axes: tuple):
+    """``fn`` (written over a batch axis) jitted on ``devices``, each taking a slice of the
+    batched arguments and results (axes 0; ``None``: the same on every device). The results'
+    shardings are given too: XLA would replicate the empty arrays among them (a pattern
+    without facets), which the next call, compiled for split ones, would refuse."""
+    if len(devices) == 1:
+        return jax.jit(fn)
+    mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
+    split, copied = jax.sharding.PartitionSpec("batch"), jax.sharding.PartitionSpec()
+
+    def specs(tree):
+        return jax.tree.map(
+            lambda a: split if a == 0 else copied, tree, is_leaf=lambda a: a is None
+        )
+
+    def shardings(tree):
+        return jax.tree.map(lambda s: jax.sharding.NamedSharding(mesh, s), specs(tree))
+
+    fn = jax.shard_map(
+        fn, mesh=mesh, in_specs=specs(in_axes), out_specs=specs(out_axes), check_vma=False
+    )
+    return jax.jit(fn, in_shardings=shardings(in_axes), out_shardings=shardings(out_axes))
+
+
+def _compiled_queue(solver, num_edges, axes, devices, width, args):
+    """The compiled slot loop for these shapes (cached) and its compile time (0 when cached)."""
+    key = (solver, _signature(args[:5]), num_edges, tuple(devices), width)
+    if key in _QUEUE_FNS:
+        return _QUEUE_FNS[key], 0.0
+    lane_axes = _Lanes(state=0, problem=axes, row=0, age=0)
+    fn = _sharded(
+        _queue_fn(solver, num_edges, axes, width),
+        devices,
+        (lane_axes, axes, 0, 0, 0, None, None),
+        (lane_axes, 0, 0, 0, 0),
+    )
+    t0 = time.perf_counter()
+    _QUEUE_FNS[key] = fn.lower(*args).compile()
+    _COMPILES[0] += 1
+    return _QUEUE_FNS[key], time.perf_counter() - t0
+
+
+_SHAPES: dict = {}
+
+
+def _limits(max_iter: int, max_time: float | None, per_step: float | None) -> tuple:
+    """The slot loop's ``(max_iter, time_steps)``: ``max_time`` in iterations of the loop at
+    the time one took (unknown before the first call, which runs one)."""
+    if max_time is None:
+        time_steps = _INT32_MAX
+    elif per_step is None:
+        time_steps = 0 if max_time <= 0 else _INT32_MAX
+    else:
+        time_steps = int(min(max_time / max(per_step, 1e-12), _INT32_MAX))
+    return np.int32(max_iter), np.int32(time_steps)
+
+
+def _lane_shapes(solver: Solver, problem: Problem, axes, num_edges: int):
+    """Shapes of the slots' solver state, metrics, positions and angles (cached: tracing the
+    solver costs a tenth of a second)."""
+    key = (solver, _signature(problem), num_edges)
+    if key not in _SHAPES:
+        _SHAPES[key] = jax.eval_shape(
+            jax.vmap(lambda p: measured(solver.init(p), p, num_edges), in_axes=(axes,)), problem
+        )
+    return _SHAPES[key]
 
 
 def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_time, finish):
     """Solve problems of one compiled shape in ``size`` slots (padded to ``to``, or with
-    ``shared`` topology unpadded): each call runs every slot for a number of iterations; the
-    members that have stopped are handed to ``finish([(index, result), ...])`` and their slots
-    take the next problems of the queue, so no member waits for the slowest of a fixed chunk.
+    ``shared`` topology unpadded), handing each finished problem to ``finish([(index,
+    result), ...])`` after the call in which it finished.
 
-    Slots left without a problem (the queue is empty) keep their last one, stopped: a member
-    out of ``max_time`` is marked TIME_LIMIT in the state so its lane stops too.
+    The problems wait in a queue on the devices (each device its share); inside the compiled
+    loop a slot whose problem has stopped writes its result out and takes the next problem
+    (continuous batching: no slot waits for the slowest member of a chunk, nor for the host).
+    Each call runs some iterations (about :data:`~origami_jax.fold.CHUNK_SECONDS`), between
+    which the host collects results and shows progress. Time is measured per call; a
+    problem's wall time and ``max_time`` count the loop iterations it spent in its slot at
+    the measured time per iteration.
     """
-    queue = deque(group)
-    first = group[0]
     axes = _problem_axes(solver) if shared else 0
+    first = group[0]
     layout = None
     if shared and isinstance(solver, Newton):
         # one topology: all slots factor their Newton systems at once (blocksparse)
@@ -602,125 +839,132 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
     def prepared(member: _Member) -> Problem:
         return _shared(member, solver, layout) if shared else _padded(member, to, solver)
 
-    slots: list[_Member | None] = [queue.popleft() for _ in range(min(size, len(queue)))]
-    slots += [None] * (size - len(slots))
-    host = _host_problem([prepared(m or first) for m in slots], axes, dtype)
-    problem = _to_devices(host, axes, devices)
-    (start, advance), compile_time = compiled(
-        solver,
-        problem,
-        to.bars,
-        wrap=_wrap(devices),
-        key=("batch", tuple(devices), shared),
-        problem_axes=axes,
+    d = len(devices)
+    dummy = prepared(first)
+    member_bytes = sum(
+        np.asarray(a).nbytes for a in jax.tree.leaves(_map_batched(lambda a: a, axes, dummy))
     )
-    if compile_time > 0:
-        _COMPILES[0] += 1
-    t0 = time.perf_counter()
-    state, m, x, angles = start(problem)
-    check_start(solver, state)
-    # (sample, entry): a refill's sample (entry: the slots refilled) counts only for those
-    samples = [(_sample(state, m, 0.0), None)]
-    entered = np.zeros(size)  # when each slot's problem entered, seconds after t0
-    since = np.zeros(size, np.int64)  # index of its first sample
-    # refill once this many slots are free (each refill costs a start of every slot)
-    batch_refill = max(1, size // 16)
-    free: list[int] = []
-    chunk = 1
-    while True:
-        now = time.perf_counter() - t0
-        status, iteration = samples[-1][0]["status"], samples[-1][0]["iteration"]
-        occupied = np.array([member is not None for member in slots])
-        going = (status == int(Status.RUNNING)) & (iteration < max_iter)
-        if max_time is not None:
-            going &= now - entered < max_time
-        stopped = np.flatnonzero(occupied & ~going).tolist()
-        if stopped:
-            host_out = jax.device_get((state, m, x, angles))
-            table, counts = _history_table(samples, size)
+    rounds = int(np.clip(_QUEUE_BYTES // max(size * member_bytes, 1), 1, _QUEUE_PER_SLOT))
+    q = size * (1 << (rounds.bit_length() - 1))  # a power of two times the slots
+    qd = q // d
+    remaining = deque(group)
+    lanes = None
+    init = jax.vmap(solver.init, in_axes=(axes,))
+    per_step = None
+    while remaining:
+        segment = [remaining.popleft() for _ in range(min(q, len(remaining)))]
+        # member j of the round goes to device j % d, at row j // d of that device's share
+        member_at = np.full(q, -1)
+        for j in range(len(segment)):
+            member_at[(j % d) * qd + j // d] = j
+        counts = np.bincount(np.arange(len(segment)) % d, minlength=d).astype(np.int32)
+        host_queue = _host_problem(
+            [dummy if j < 0 else prepared(segment[j]) for j in member_at], axes, dtype
+        )
+        queue = _to_devices(host_queue, axes, devices)
+        if getattr(solver, "check_start", None) is not None:  # a user's time step, say
+            check_start(solver, _INITS.setdefault((solver, shared), jax.jit(init))(queue))
+        if lanes is None:  # free slots, holding copies of the first problem
+            problem = _map_batched(lambda a: a[np.zeros(size, int)], axes, host_queue)
+            state, _, x_like, angles_like = _lane_shapes(solver, problem, axes, to.bars)
+            state = jax.tree.map(lambda s: np.zeros(s.shape, s.dtype), state)
+            lanes = _Lanes(state, problem, np.full(size, -1, np.int32), np.zeros(size, np.int32))
+            lanes = _to_devices(lanes, _Lanes(0, axes, 0, 0), devices)
+        out = _Out(
+            metrics={k: np.zeros(q, dtype) for k in METRIC_NAMES},
+            x=np.zeros((q, *x_like.shape[1:]), dtype),
+            angles=np.zeros((q, *angles_like.shape[1:]), dtype),
+            status=np.zeros(q, np.int32),
+            iteration=np.zeros(q, np.int32),
+            age=np.zeros(q, np.int32),
+            entry={k: np.zeros(q, dtype) for k in _SAMPLED},
+            done=np.zeros(q, bool),
+        )
+        out = _to_devices(out, 0, devices)
+        nxt = _to_devices(np.zeros(d, np.int32), 0, devices)
+        count = _to_devices(counts, 0, devices)
+        limits = (np.int32(max_iter), np.int32(_INT32_MAX))
+        run, compile_time = _compiled_queue(
+            solver,
+            to.bars,
+            axes,
+            devices,
+            max(1, size // d // 2),  # entries and exits gathered half a device's slots wide
+            (lanes, queue, nxt, count, out, np.int32(1), limits),
+        )
+        seen = np.zeros(q, bool)  # rows whose results were handed on
+        seen[member_at < 0] = True
+        wall = np.zeros(q)  # seconds each row has run, up to its age ``aged``
+        aged = np.zeros(q, np.int64)
+        samples: dict[int, list] = {}
+        chunk = 1
+
+        lanes, nxt, out, k, sample = run(
+            lanes, queue, nxt, count, out, np.int32(chunk), _limits(max_iter, max_time, per_step)
+        )
+        t_last = time.perf_counter()
+        while True:
+            done_out, sample, k = jax.device_get((out, sample, k))
+            seconds, t_last = time.perf_counter() - t_last, time.perf_counter()
+            iterations = int(np.max(k))
+            if iterations:
+                per_step = seconds / iterations
+            chunk = next_chunk(chunk, seconds, max(iterations, 1))
+            finished = done_out.done & ~seen
+            going = not (seen | finished).all()
+            if going:  # the next call, before this one's results are read
+                limits = _limits(max_iter, max_time, per_step)
+                lanes, nxt, out, k_next, sample_next = run(
+                    lanes, queue, nxt, count, out, np.int32(chunk), limits
+                )
+            for lane in np.flatnonzero(sample["row"] >= 0):
+                r = lane // (size // d) * qd + int(sample["row"][lane])  # rows are per device
+                wall[r] += (int(sample["age"][lane]) - aged[r]) * (per_step or 0.0)
+                aged[r] = int(sample["age"][lane])
+                samples.setdefault(r, []).append(
+                    {key: float(sample[key][lane]) for key in (*_SAMPLED, "iteration")}
+                    | {"wall_time": wall[r]}
+                )
             done = []
-            for b in stopped:
-                out_of_time = status[b] == Status.RUNNING and iteration[b] < max_iter
-                rows = since[b] + np.flatnonzero(counts[since[b] :, b])
-                history = {k: v[rows, b] for k, v in table.items()}
+            for r in np.flatnonzero(finished):
+                wall[r] += (int(done_out.age[r]) - aged[r]) * (per_step or 0.0)
+                member = segment[member_at[r]]
+                history = samples.pop(r, [])
                 result = _result(
-                    slots[b], b, to, *host_out, history, entered[b], out_of_time, solver,
-                    dtype, now - entered[b], compile_time,
-                )  # fmt: skip
-                done.append((slots[b].index, result))
-                slots[b] = None
+                    member, to, r, done_out, history, max_iter, solver, dtype, wall[r], compile_time
+                )
+                done.append((member.index, result))
+                seen[r] = True
             finish(done)
-            free += stopped
-            timed = [b for b in stopped if status[b] == Status.RUNNING]
-            if timed:  # stop their lanes: a running lane keeps the vmapped loop going
-                flags = np.array(host_out[0].status)
-                flags[timed] = Status.TIME_LIMIT
-                state = _to_devices(host_out[0]._replace(status=flags), 0, devices)
-        running = [b for b, member in enumerate(slots) if member is not None]
-        if queue and free and (len(free) >= batch_refill or not running):
-            refill = free[: len(queue)]
-            free = free[len(refill) :]
-            for b in refill:
-                slots[b] = queue.popleft()
-            _set_rows(host, axes, refill, [prepared(slots[b]) for b in refill])
-            problem = _to_devices(host, axes, devices)
-            fresh = start(problem)
-            check_start(solver, fresh[0])
-            old = (state, m, x, angles)
-            state, m, x, angles = _take_rows(refill, *jax.device_get((fresh, old)))
-            state = _to_devices(state, 0, devices)
-            entry = np.zeros(size, bool)
-            entry[refill] = True
-            samples.append((_sample(state, m, time.perf_counter() - t0), entry))
-            entered[refill] = samples[-1][0]["wall_time"]
-            since[refill] = len(samples) - 1
-            continue  # a refilled problem may stop at its start (max_iter 0, say)
-        if not running:
-            break
-        # only the running members' samples are still needed
-        keep = int(np.min(since[running]))
-        samples, since = samples[keep:], since - keep
-        iteration = samples[-1][0]["iteration"]
-        steps = max(1, min(chunk, max_iter - int(np.max(iteration[running]))))
-        t_chunk = time.perf_counter()
-        # dispatch returns before the chunk has run: wait for it (see fold.drive)
-        state, m, x, angles = jax.block_until_ready(advance(state, problem, np.int32(steps)))
-        t_done = time.perf_counter()
-        samples.append((_sample(state, m, t_done - t0), None))
-        chunk = next_chunk(chunk, t_done - t_chunk, steps)
+            if not going:
+                break
+            k, sample = k_next, sample_next
 
 
-def _history_table(samples: list, size: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """The samples' history fields as (S, size) arrays, and (S, size) whether each sample counts
-    for each slot (a refill's sample counts only for the slots refilled)."""
-    table = {
-        k: np.stack([np.broadcast_to(np.asarray(s[k], np.float64), size) for s, _ in samples])
-        for k in HISTORY_FIELDS
-    }
-    counts = np.stack([np.ones(size, bool) if e is None else e for _, e in samples])
-    return table, counts
-
-
-def _result(
-    member, b, to, state, m, x, angles, history, entered, out_of_time, solver, dtype, wall, comp
-):
-    """Slot ``b``'s result, unpadded; ``history`` its samples' fields since it ``entered``."""
+def _result(member, to, r, out, samples, max_iter, solver, dtype, wall, compile_time):
+    """Queue row ``r``'s result, unpadded; ``samples``: its slot's samples between calls."""
     s = member.sizes
-    status = Status(int(state.status[b]))
+    status = Status(int(out.status[r]))
+    iterations = int(out.iteration[r])
     if status == Status.RUNNING:
-        status = Status.TIME_LIMIT if out_of_time else Status.MAX_ITER
-    metrics = {k: float(m[k][b]) for k in METRIC_NAMES}
+        status = Status.MAX_ITER if iterations >= max_iter else Status.TIME_LIMIT
+    metrics = {k: float(out.metrics[k][r]) for k in METRIC_NAMES}
     # padding adds exact zeros: means over the real elements only
     metrics["strain_mean"] *= to.bars / s.bars
     metrics["fold_angle_error_mean"] *= to.creases / s.creases if s.creases else 0.0
-    iterations = int(state.iteration[b])
+    entry = {k: float(out.entry[k][r]) for k in _SAMPLED} | {"iteration": 0, "wall_time": 0.0}
+    last = {k: metrics[k] for k in _SAMPLED} | {"iteration": iterations, "wall_time": wall}
+    rows = [entry] + [x for x in samples if 0 < x["iteration"] < iterations] + [last]
+    if iterations == 0:
+        rows = [entry]
+    table = np.array([[x[k] for k in HISTORY_FIELDS] for x in rows], np.float64)
+    history = dict(zip(HISTORY_FIELDS, table.T, strict=True))
     tol = float(member.problem.tol)
-    history = {**history, "wall_time": history["wall_time"] - entered}
-    positions = np.asarray(x[b, : s.vertices], np.float64)
+    positions = np.asarray(out.x[r, : s.vertices], np.float64)
     return FoldResult(
         pattern=member.pattern,
         positions=positions,
-        fold_angles=np.asarray(angles[b, : s.bars], np.float64),
+        fold_angles=np.asarray(out.angles[r, : s.bars], np.float64),
         converged=status == Status.CONVERGED,
         status=status,
         reason=_reason(status, metrics, tol, iterations, positions, member.pattern.mesh),
@@ -729,7 +973,7 @@ def _result(
         percent=float(member.problem.params.percent),
         dtype=dtype.name,
         wall_time=wall,
-        compile_time=comp,
+        compile_time=compile_time,
         history=history,
         **metrics,
     )

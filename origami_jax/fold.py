@@ -164,24 +164,25 @@ def _signature(tree) -> tuple:
     return treedef, tuple((np.shape(x), jnp.result_type(x).name) for x in leaves)
 
 
+def measured(state, problem, num_edges: int):
+    """``(state, metrics, positions, per-edge fold angles)`` of a solver state (pure)."""
+    x = positions(problem, state.u)
+    m = position_metrics(x, problem.structure, problem.params, state.reference)
+    m["grad_norm_rel"] = state.grad_max / jnp.where(state.grad_max0 > 0, state.grad_max0, 1)
+    angles = edge_fold_angles(x, problem.structure, state.reference, num_edges)
+    return state, m, x, angles
+
+
 def solve_fns(solver: Solver, num_edges: int):
     """``(start, advance)``: ``start(problem)`` the solver's start state,
     ``advance(state, problem, steps)`` up to ``steps`` iterations more; each returns the state,
-    the metrics, positions and per-edge fold angles (pure; :func:`fold` jits them,
-    ``fold_batch`` vmaps them)."""
-
-    def measured(state, problem):
-        x = positions(problem, state.u)
-        m = position_metrics(x, problem.structure, problem.params, state.reference)
-        m["grad_norm_rel"] = state.grad_max / jnp.where(state.grad_max0 > 0, state.grad_max0, 1)
-        angles = edge_fold_angles(x, problem.structure, state.reference, num_edges)
-        return state, m, x, angles
+    the metrics, positions and per-edge fold angles (pure; :func:`fold` jits them)."""
 
     def start(problem):
-        return measured(solver.init(problem), problem)
+        return measured(solver.init(problem), problem, num_edges)
 
     def advance(state, problem, steps):
-        return measured(solver.run(state, problem, steps), problem)
+        return measured(solver.run(state, problem, steps), problem, num_edges)
 
     return start, advance
 

@@ -15,7 +15,7 @@ from origami_jax import PatternError, fold, patterns
 from origami_jax import batch as batch_module
 from origami_jax.batch import BatchSizes, bucket, compile_count, fold_batch, problem_sizes
 from origami_jax.energy import energy
-from origami_jax.fold import drive
+from origami_jax.fold import compiled, drive
 from origami_jax.geometry import bar_lengths, fold_angles
 from origami_jax.solvers import Newton, Status
 from origami_jax.solvers.base import (
@@ -161,8 +161,8 @@ def test_padded_solve_equals_unpadded_bucket():
     for problem, num_edges in ((small, bucket(member.sizes).bars), (big, len(big.structure.bars))):
         problem = jax.tree.map(lambda a: jnp.asarray(a)[None], problem)
         solver = Newton()
-        (start, advance), _ = batch_module.compiled(
-            solver, problem, num_edges, wrap=batch_module._wrap(jax.devices()[:1]), key="test"
+        (start, advance), _ = compiled(
+            solver, problem, num_edges, wrap=lambda fn, axes: jax.vmap(fn, in_axes=axes), key="t"
         )
         state, m, x, _, _, _ = drive(solver, start, advance, problem, 200, None, None)
         out.append((np.asarray(x[0, : member.sizes.vertices]), float(m["energy"][0])))
@@ -197,11 +197,20 @@ def test_stream_compiles_once_per_bucket():
 
 
 def test_interrupt_keeps_finished_problems(monkeypatch):
-    # one slot: the three Miura-ori run one after another; Ctrl-C as the second one enters
-    def interrupted(*args):
-        raise KeyboardInterrupt
+    # one slot, one iteration per call: the three Miura-ori run one after another; Ctrl-C as
+    # the host reads the second one's result
+    results_read = []
+    result = batch_module._result
 
-    monkeypatch.setattr(batch_module, "_take_rows", interrupted)
+    def interrupted(*args):
+        results_read.append(1)
+        if len(results_read) == 2:
+            raise KeyboardInterrupt
+        return result(*args)
+
+    monkeypatch.setattr(batch_module, "_result", interrupted)
+    monkeypatch.setattr(batch_module, "next_chunk", lambda *args: 1)
+    monkeypatch.setattr(batch_module, "_QUEUE_PER_SLOT", 1)  # as test_queue_in_rounds
     with pytest.warns(RuntimeWarning, match="interrupted: 1 of 3 problems have results"):
         results = fold_batch(MIURAS, chunk_size=1, devices=jax.devices()[:1], progress=False)
     assert [r is not None for r in results] == [True, False, False]
@@ -219,6 +228,17 @@ def test_iteration_and_time_limits_in_refilled_slots():
     assert [(r.status, r.iterations) for r in timed] == [(Status.TIME_LIMIT, 0)] * 3
     with pytest.raises(ValueError, match="max_iter"):
         fold_batch(MIURAS, max_iter=-1)
+
+
+def test_queue_in_rounds(monkeypatch):
+    # a queue of one problem per slot: three rounds, each refilling the slot from the host
+    monkeypatch.setattr(batch_module, "_QUEUE_PER_SLOT", 1)
+    results = fold_batch(MIURAS, chunk_size=1, devices=jax.devices()[:1], progress=False)
+    for cp, r in zip(MIURAS, results, strict=True):
+        single = fold(cp)
+        assert r.pattern is cp and r.converged and r.iterations == single.iterations
+        assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
+        assert r.history["iteration"][-1] == r.iterations and r.wall_time > 0
 
 
 def test_finished_slots_take_the_next_problems():
