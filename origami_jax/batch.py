@@ -556,19 +556,24 @@ def _to_devices(tree, axes, devices):
 
 class _Lanes(NamedTuple):
     """The slots of a compiled solve: each one's solver state and problem, the queue row of
-    the problem it holds (-1: none) and the iterations it has run since it entered."""
+    the problem it holds (-1: none), the iterations it has run since it entered and its start
+    metrics (``entry``: the first sample of its history)."""
 
     state: object
     problem: Problem
     row: jax.Array
     age: jax.Array
+    entry: dict
 
 
 class _Out(NamedTuple):
-    """Per queue row, written when its problem leaves its slot: the end metrics, positions,
-    per-edge fold angles, status, iterations and age (iterations of the compiled loop it ran),
-    the start metrics (``entry``, the first history sample) and whether it is done."""
+    """The problems that left their slots in one call, in the order they left: queue row, end
+    metrics, positions, per-edge fold angles, status, iterations, age (iterations of the loop
+    it ran) and start metrics. Its length (a few times the slots) bounds the exits per call;
+    it is all the loop carries besides the slots, so an iteration costs the same whatever the
+    queue's length."""
 
+    row: jax.Array
     metrics: dict
     x: jax.Array
     angles: jax.Array
@@ -576,7 +581,6 @@ class _Out(NamedTuple):
     iteration: jax.Array
     age: jax.Array
     entry: dict
-    done: jax.Array
 
 
 _SAMPLED = ("fold_angle_error_max", "strain_max", "energy", "grad_norm_rel")
@@ -604,15 +608,15 @@ def _queue_fn(solver: Solver, num_edges: int, axes, width: int):
     """The compiled loop of one device's slots, pure: ``run(lanes, queue, next, count, out,
     steps, limits)``. Each iteration steps the running slots; once ``width // 2`` slots have
     stopped (or none runs), up to ``width`` at a time of the stopped ones write their results
-    into ``out`` at their queue rows and of the free ones take the next rows of ``queue``
-    (``next`` (1,) the first not yet taken, ``count`` (1,) how many are real), starting there:
-    gathered ``width`` slots wide, so entries and exits cost a fraction of an iteration. Up to
-    ``steps`` iterations, or until every slot is free and the queue empty. ``limits``:
-    ``(max_iter, time_steps)``: a problem stops (its status still RUNNING) at ``max_iter``
-    iterations or after ``time_steps`` iterations of the loop in its slot (``max_time`` over
-    the measured time of one).
+    into the outbox ``out`` and of the free ones take the next rows of ``queue`` (``next``
+    (1,) the first not yet taken, ``count`` (1,) how many are real), starting there: gathered
+    ``width`` slots wide, so entries and exits cost a fraction of an iteration. Up to
+    ``steps`` iterations, until the outbox has no room for ``width`` more, or until every slot
+    is free and the queue empty. ``limits``: ``(max_iter, time_steps)``: a problem stops (its
+    status still RUNNING) at ``max_iter`` iterations or after ``time_steps`` iterations of
+    the loop in its slot (``max_time`` over the measured time of one).
 
-    Returns ``(lanes, next, out, iterations run (1,), end sample of the slots)``.
+    Returns ``(lanes, next, out, exits (1,), iterations run (1,), end sample of the slots)``.
     """
     init = jax.vmap(solver.init, in_axes=(axes,))
     advance = jax.vmap(solver.run, in_axes=(0, axes, 0))
@@ -620,43 +624,49 @@ def _queue_fn(solver: Solver, num_edges: int, axes, width: int):
 
     def run(lanes, queue, nxt, count, out, steps, limits):
         max_iter, time_steps = limits
-        size, slots = out.done.shape[0], lanes.row.shape[0]
+        size, slots, room = queue.start.shape[0], lanes.row.shape[0], out.row.shape[0]
 
         def running(lanes):
             s = lanes.state
             going = (s.status == Status.RUNNING) & (s.iteration < max_iter)
             return (lanes.row >= 0) & going & (lanes.age < time_steps)
 
+        def stopped(lanes):
+            return (lanes.row >= 0) & ~running(lanes)
+
         def pick(flags):
-            """Up to ``width`` slots where ``flags``: their indices (``slots``: none), clipped."""
+            """Up to ``width`` slots where ``flags``, first ones first: their indices (past the
+            end: none), and the indices clipped."""
             at = jnp.nonzero(flags, size=width, fill_value=slots)[0]
             return at, jnp.minimum(at, slots - 1)
 
         def put(buffer, at, value):  # rows ``at`` of ``buffer`` (out of range: dropped)
             return buffer.at[at].set(value.astype(buffer.dtype), mode="drop")
 
-        def record(lanes, out, stop):
+        def record(lanes, out, filled, stop):
             at, lane = pick(stop)
             state = jax.tree.map(lambda a: a[lane], lanes.state)
             m, x, angles = measure(state, _map_batched(lambda a: a[lane], axes, lanes.problem))
-            rows = jnp.where(at < slots, lanes.row[lane], size)
+            leaving = at < slots
+            to = jnp.where(leaving, filled[0] + jnp.arange(width), room)
             out = _Out(
-                metrics={k: put(out.metrics[k], rows, m[k]) for k in out.metrics},
-                x=put(out.x, rows, x),
-                angles=put(out.angles, rows, angles),
-                status=put(out.status, rows, state.status),
-                iteration=put(out.iteration, rows, state.iteration),
-                age=put(out.age, rows, lanes.age[lane]),
-                entry=out.entry,
-                done=put(out.done, rows, jnp.ones(width, bool)),
+                row=put(out.row, to, lanes.row[lane]),
+                metrics={k: put(out.metrics[k], to, m[k]) for k in out.metrics},
+                x=put(out.x, to, x),
+                angles=put(out.angles, to, angles),
+                status=put(out.status, to, state.status),
+                iteration=put(out.iteration, to, state.iteration),
+                age=put(out.age, to, lanes.age[lane]),
+                entry={k: put(out.entry[k], to, lanes.entry[k][lane]) for k in out.entry},
             )
-            return lanes._replace(row=put(lanes.row, at, jnp.full(width, -1))), out
+            lanes = lanes._replace(row=put(lanes.row, at, jnp.full(width, -1)))
+            return lanes, out, filled + jnp.sum(leaving, dtype=jnp.int32)
 
-        def enter(lanes, nxt, out):
+        def enter(lanes, nxt):
             at, _ = pick(lanes.row < 0)
             take = (at < slots) & (jnp.arange(width) < count[0] - nxt[0])
             at = jnp.where(take, at, slots)
-            rows = jnp.where(take, nxt[0] + jnp.arange(width, dtype=jnp.int32), size)
+            rows = nxt[0] + jnp.arange(width, dtype=jnp.int32)
             problem = _map_batched(lambda q: q[jnp.minimum(rows, size - 1)], axes, queue)
             fresh = init(problem)
             m, _, _ = measure(fresh, problem)
@@ -665,44 +675,44 @@ def _queue_fn(solver: Solver, num_edges: int, axes, width: int):
                 problem=_map_batched(lambda a, b: put(a, at, b), axes, lanes.problem, problem),
                 row=put(lanes.row, at, rows),
                 age=put(lanes.age, at, jnp.zeros(width)),
+                entry={k: put(lanes.entry[k], at, m[k]) for k in lanes.entry},
             )
-            entry = {k: put(out.entry[k], rows, m[k]) for k in out.entry}
-            return lanes, nxt + jnp.sum(take, dtype=jnp.int32), out._replace(entry=entry)
-
-        def stopped(lanes):
-            return (lanes.row >= 0) & ~running(lanes)
-
-        def settle_once(carry):
-            lanes, nxt, out = carry
-            stop = stopped(lanes)
-            lanes, out = jax.lax.cond(
-                jnp.any(stop), record, lambda l, o, s: (l, o), lanes, out, stop
-            )
-            return jax.lax.cond(
-                jnp.any(lanes.row < 0) & (nxt[0] < count[0]),
-                enter,
-                lambda *c: c,
-                lanes,
-                nxt,
-                out,
-            )
+            return lanes, nxt + jnp.sum(take, dtype=jnp.int32)
 
         def unsettled(carry):
-            lanes, nxt, _ = carry
-            return jnp.any(stopped(lanes)) | (jnp.any(lanes.row < 0) & (nxt[0] < count[0]))
+            lanes, nxt, _, filled = carry
+            exits = jnp.any(stopped(lanes)) & (filled[0] + width <= room)
+            return exits | (jnp.any(lanes.row < 0) & (nxt[0] < count[0]))
+
+        def settle_once(carry):
+            lanes, nxt, out, filled = carry
+            stop = stopped(lanes)
+            lanes, out, filled = jax.lax.cond(
+                jnp.any(stop) & (filled[0] + width <= room),
+                record,
+                lambda l, o, f, s: (l, o, f),
+                lanes,
+                out,
+                filled,
+                stop,
+            )
+            lanes, nxt = jax.lax.cond(
+                jnp.any(lanes.row < 0) & (nxt[0] < count[0]), enter, lambda *c: c, lanes, nxt
+            )
+            return lanes, nxt, out, filled
 
         def settle(carry):
             return jax.lax.while_loop(unsettled, settle_once, carry)
 
         def body(carry):
-            k, lanes, nxt, out = carry
+            k, lanes, nxt, out, filled = carry
             # the slots' problems stay fixed until the next settle: as a constant of the inner
             # loop (not carried), what depends on them alone is computed once (carried, an
             # iteration cost about a fifth more)
-            problem, row = lanes.problem, lanes.row
+            problem, row, entry = lanes.problem, lanes.row, lanes.entry
 
             def due(state, age):
-                lanes = _Lanes(state, problem, row, age)
+                lanes = _Lanes(state, problem, row, age, entry)
                 waiting = jnp.sum(stopped(lanes)) + jnp.minimum(jnp.sum(row < 0), count[0] - nxt[0])
                 return (2 * waiting >= width) | ~jnp.any(running(lanes))
 
@@ -712,32 +722,39 @@ def _queue_fn(solver: Solver, num_edges: int, axes, width: int):
 
             def step(c):
                 j, state, age = c
-                go = running(_Lanes(state, problem, row, age)).astype(jnp.int32)
+                go = running(_Lanes(state, problem, row, age, entry)).astype(jnp.int32)
                 return j + 1, advance(state, problem, go), age + go
 
             k, state, age = jax.lax.while_loop(more_steps, step, (k, lanes.state, lanes.age))
-            lanes, nxt, out = settle((lanes._replace(state=state, age=age), nxt, out))
-            return k, lanes, nxt, out
+            lanes, nxt, out, filled = settle(
+                (lanes._replace(state=state, age=age), nxt, out, filled)
+            )
+            return k, lanes, nxt, out, filled
 
         def more(carry):
-            k, lanes, _, _ = carry
-            return (k < steps) & jnp.any(lanes.row >= 0)
+            k, lanes, _, _, filled = carry
+            # once the outbox is full, the call ends (the next one takes the stopped slots)
+            return (k < steps) & jnp.any(lanes.row >= 0) & (filled[0] + width <= room)
 
-        lanes, nxt, out = settle((lanes, nxt, out))
-        k, lanes, nxt, out = jax.lax.while_loop(more, body, (jnp.int32(0), lanes, nxt, out))
+        filled = jnp.zeros(1, jnp.int32)
+        lanes, nxt, out, filled = settle((lanes, nxt, out, filled))
+        carry = (jnp.int32(0), lanes, nxt, out, filled)
+        k, lanes, nxt, out, filled = jax.lax.while_loop(more, body, carry)
         m, _, _ = measure(lanes.state, lanes.problem)
         s = lanes.state
         sample = {**{key: m[key] for key in _SAMPLED}, "iteration": s.iteration}
         sample.update(row=lanes.row, age=lanes.age)
-        return lanes, nxt, out, k[None], sample
+        return lanes, nxt, out, filled, k[None], sample
 
     return run
 
 
 # a round of the queue holds up to this many problems per slot, and about this many bytes of
 # problems; a larger group runs in several rounds (each ends with its slots draining)
-_QUEUE_PER_SLOT = 8
+_QUEUE_PER_SLOT = 32
 _QUEUE_BYTES = 2**26
+# the outbox holds this many exits per slot (a call ends when it is full)
+_OUTBOX_PER_SLOT = 4
 _INT32_MAX = 2**31 - 1
 _QUEUE_FNS: dict = {}
 _INITS: dict = {}
@@ -772,12 +789,12 @@ def _compiled_queue(solver, num_edges, axes, devices, width, args):
     key = (solver, _signature(args[:5]), num_edges, tuple(devices), width)
     if key in _QUEUE_FNS:
         return _QUEUE_FNS[key], 0.0
-    lane_axes = _Lanes(state=0, problem=axes, row=0, age=0)
+    lane_axes = _Lanes(state=0, problem=axes, row=0, age=0, entry=0)
     fn = _sharded(
         _queue_fn(solver, num_edges, axes, width),
         devices,
         (lane_axes, axes, 0, 0, 0, None, None),
-        (lane_axes, 0, 0, 0, 0),
+        (lane_axes, 0, 0, 0, 0, 0),
     )
     t0 = time.perf_counter()
     _QUEUE_FNS[key] = fn.lower(*args).compile()
@@ -868,19 +885,22 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
             problem = _map_batched(lambda a: a[np.zeros(size, int)], axes, host_queue)
             state, _, x_like, angles_like = _lane_shapes(solver, problem, axes, to.bars)
             state = jax.tree.map(lambda s: np.zeros(s.shape, s.dtype), state)
-            lanes = _Lanes(state, problem, np.full(size, -1, np.int32), np.zeros(size, np.int32))
-            lanes = _to_devices(lanes, _Lanes(0, axes, 0, 0), devices)
-        out = _Out(
-            metrics={k: np.zeros(q, dtype) for k in METRIC_NAMES},
-            x=np.zeros((q, *x_like.shape[1:]), dtype),
-            angles=np.zeros((q, *angles_like.shape[1:]), dtype),
-            status=np.zeros(q, np.int32),
-            iteration=np.zeros(q, np.int32),
-            age=np.zeros(q, np.int32),
-            entry={k: np.zeros(q, dtype) for k in _SAMPLED},
-            done=np.zeros(q, bool),
-        )
-        out = _to_devices(out, 0, devices)
+            free = np.full(size, -1, np.int32)
+            entry = {k: np.zeros(size, dtype) for k in _SAMPLED}
+            lanes = _Lanes(state, problem, free, np.zeros(size, np.int32), entry)
+            lanes = _to_devices(lanes, _Lanes(0, axes, 0, 0, 0), devices)
+            room = _OUTBOX_PER_SLOT * size
+            outbox = _Out(
+                row=np.zeros(room, np.int32),
+                metrics={k: np.zeros(room, dtype) for k in METRIC_NAMES},
+                x=np.zeros((room, *x_like.shape[1:]), dtype),
+                angles=np.zeros((room, *angles_like.shape[1:]), dtype),
+                status=np.zeros(room, np.int32),
+                iteration=np.zeros(room, np.int32),
+                age=np.zeros(room, np.int32),
+                entry={k: np.zeros(room, dtype) for k in _SAMPLED},
+            )
+            outbox = _to_devices(outbox, 0, devices)
         nxt = _to_devices(np.zeros(d, np.int32), 0, devices)
         count = _to_devices(counts, 0, devices)
         limits = (np.int32(max_iter), np.int32(_INT32_MAX))
@@ -890,32 +910,29 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
             axes,
             devices,
             max(1, size // d // 2),  # entries and exits gathered half a device's slots wide
-            (lanes, queue, nxt, count, out, np.int32(1), limits),
+            (lanes, queue, nxt, count, outbox, np.int32(1), limits),
         )
-        seen = np.zeros(q, bool)  # rows whose results were handed on
-        seen[member_at < 0] = True
         wall = np.zeros(q)  # seconds each row has run, up to its age ``aged``
         aged = np.zeros(q, np.int64)
         samples: dict[int, list] = {}
-        chunk = 1
-
-        lanes, nxt, out, k, sample = run(
-            lanes, queue, nxt, count, out, np.int32(chunk), _limits(max_iter, max_time, per_step)
+        chunk, left = 1, len(segment)
+        limits = _limits(max_iter, max_time, per_step)
+        lanes, nxt, out, filled, k, sample = run(
+            lanes, queue, nxt, count, outbox, np.int32(chunk), limits
         )
         t_last = time.perf_counter()
         while True:
-            done_out, sample, k = jax.device_get((out, sample, k))
+            out, filled, sample, k = jax.device_get((out, filled, sample, k))
             seconds, t_last = time.perf_counter() - t_last, time.perf_counter()
             iterations = int(np.max(k))
             if iterations:
                 per_step = seconds / iterations
             chunk = next_chunk(chunk, seconds, max(iterations, 1))
-            finished = done_out.done & ~seen
-            going = not (seen | finished).all()
-            if going:  # the next call, before this one's results are read
+            left -= int(np.sum(filled))
+            if left:  # the next call, before this one's results are read
                 limits = _limits(max_iter, max_time, per_step)
-                lanes, nxt, out, k_next, sample_next = run(
-                    lanes, queue, nxt, count, out, np.int32(chunk), limits
+                lanes, nxt, next_out, next_filled, next_k, next_sample = run(
+                    lanes, queue, nxt, count, outbox, np.int32(chunk), limits
                 )
             for lane in np.flatnonzero(sample["row"] >= 0):
                 r = lane // (size // d) * qd + int(sample["row"][lane])  # rows are per device
@@ -926,19 +943,24 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
                     | {"wall_time": wall[r]}
                 )
             done = []
-            for r in np.flatnonzero(finished):
-                wall[r] += (int(done_out.age[r]) - aged[r]) * (per_step or 0.0)
+            per_device = room // d
+            for j in (
+                i
+                for dev in range(d)
+                for i in range(dev * per_device, dev * per_device + int(filled[dev]))
+            ):
+                r = j // per_device * qd + int(out.row[j])
+                wall[r] += (int(out.age[j]) - aged[r]) * (per_step or 0.0)
                 member = segment[member_at[r]]
                 history = samples.pop(r, [])
                 result = _result(
-                    member, to, r, done_out, history, max_iter, solver, dtype, wall[r], compile_time
+                    member, to, j, out, history, max_iter, solver, dtype, wall[r], compile_time
                 )
                 done.append((member.index, result))
-                seen[r] = True
             finish(done)
-            if not going:
+            if not left:
                 break
-            k, sample = k_next, sample_next
+            out, filled, k, sample = next_out, next_filled, next_k, next_sample
 
 
 def _result(member, to, r, out, samples, max_iter, solver, dtype, wall, compile_time):

@@ -211,6 +211,7 @@ def test_interrupt_keeps_finished_problems(monkeypatch):
     monkeypatch.setattr(batch_module, "_result", interrupted)
     monkeypatch.setattr(batch_module, "next_chunk", lambda *args: 1)
     monkeypatch.setattr(batch_module, "_QUEUE_PER_SLOT", 1)  # as test_queue_in_rounds
+    monkeypatch.setattr(batch_module, "_OUTBOX_PER_SLOT", 1)
     with pytest.warns(RuntimeWarning, match="interrupted: 1 of 3 problems have results"):
         results = fold_batch(MIURAS, chunk_size=1, devices=jax.devices()[:1], progress=False)
     assert [r is not None for r in results] == [True, False, False]
@@ -231,14 +232,21 @@ def test_iteration_and_time_limits_in_refilled_slots():
 
 
 def test_queue_in_rounds(monkeypatch):
-    # a queue of one problem per slot: three rounds, each refilling the slot from the host
+    # a queue of one problem per slot: three rounds, each refilling the slot from the host;
+    # an outbox of one exit: a call ends at each exit
     monkeypatch.setattr(batch_module, "_QUEUE_PER_SLOT", 1)
-    results = fold_batch(MIURAS, chunk_size=1, devices=jax.devices()[:1], progress=False)
-    for cp, r in zip(MIURAS, results, strict=True):
+    monkeypatch.setattr(batch_module, "_OUTBOX_PER_SLOT", 1)
+    one = dict(chunk_size=1, devices=jax.devices()[:1], progress=False)
+    for cp, r in zip(MIURAS, fold_batch(MIURAS, **one), strict=True):
         single = fold(cp)
         assert r.pattern is cp and r.converged and r.iterations == single.iterations
         assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
         assert r.history["iteration"][-1] == r.iterations and r.wall_time > 0
+    # more exits than the outbox holds in one call: every problem stops at its start
+    cps = MIURAS * 3
+    results = fold_batch(cps, max_iter=0, **{**one, "chunk_size": 2})
+    assert [r.pattern for r in results] == cps
+    assert all(r.iterations == 0 and r.status == Status.MAX_ITER for r in results)
 
 
 def test_finished_slots_take_the_next_problems():
