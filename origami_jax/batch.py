@@ -943,12 +943,9 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
                     | {"wall_time": wall[r]}
                 )
             done = []
-            per_device = room // d
-            for j in (
-                i
-                for dev in range(d)
-                for i in range(dev * per_device, dev * per_device + int(filled[dev]))
-            ):
+            per_device = room // d  # each device's share of the outbox, filled from its start
+            exits = [dev * per_device + i for dev in range(d) for i in range(int(filled[dev]))]
+            for j in exits:
                 r = j // per_device * qd + int(out.row[j])
                 wall[r] += (int(out.age[j]) - aged[r]) * (per_step or 0.0)
                 member = segment[member_at[r]]
