@@ -187,17 +187,13 @@ def solve_fns(solver: Solver, num_edges: int):
     return start, advance
 
 
-def compiled(solver: Solver, problem, num_edges: int, wrap=None, key=(), problem_axes=0):
+def compiled(solver: Solver, problem, num_edges: int):
     """``(start, advance)`` of :func:`solve_fns` compiled for this solver and these shapes
-    (cached), and the compile time (0 when cached). ``wrap(fn, in_axes)`` transforms both
-    before ``jit`` (``fold_batch``: vmap and sharding, with ``problem_axes`` the problem's, a
-    prefix pytree of 0 and None; ``key`` tells its variants apart)."""
-    cache_key = (solver, _signature(problem), num_edges, key)
+    (cached), and the compile time (0 when cached)."""
+    cache_key = (solver, _signature(problem), num_edges)
     if cache_key in _CACHE:
         return _CACHE[cache_key], 0.0
     start, advance = solve_fns(solver, num_edges)
-    if wrap is not None:
-        start, advance = wrap(start, (problem_axes,)), wrap(advance, (0, problem_axes, None))
     t0 = time.perf_counter()
     start_c = jax.jit(start).lower(problem).compile()
     state_shape = jax.eval_shape(start, problem)[0]

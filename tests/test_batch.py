@@ -15,7 +15,7 @@ from origami_jax import PatternError, fold, patterns
 from origami_jax import batch as batch_module
 from origami_jax.batch import BatchSizes, bucket, compile_count, fold_batch, problem_sizes
 from origami_jax.energy import energy
-from origami_jax.fold import compiled, drive
+from origami_jax.fold import drive, solve_fns
 from origami_jax.geometry import bar_lengths, fold_angles
 from origami_jax.solvers import Newton, Status
 from origami_jax.solvers.base import (
@@ -161,9 +161,9 @@ def test_padded_solve_equals_unpadded_bucket():
     for problem, num_edges in ((small, bucket(member.sizes).bars), (big, len(big.structure.bars))):
         problem = jax.tree.map(lambda a: jnp.asarray(a)[None], problem)
         solver = Newton()
-        (start, advance), _ = compiled(
-            solver, problem, num_edges, wrap=lambda fn, axes: jax.vmap(fn, in_axes=axes), key="t"
-        )
+        start, advance = solve_fns(solver, num_edges)
+        start = jax.jit(jax.vmap(start))
+        advance = jax.jit(jax.vmap(advance, in_axes=(0, 0, None)))
         state, m, x, _, _, _ = drive(solver, start, advance, problem, 200, None, None)
         out.append((np.asarray(x[0, : member.sizes.vertices]), float(m["energy"][0])))
     assert np.max(np.abs(out[0][0] - out[1][0])) <= 1e-10 * cp.diameter
