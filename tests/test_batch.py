@@ -17,7 +17,7 @@ from origami_jax.batch import BatchSizes, bucket, compile_count, fold_batch, pro
 from origami_jax.energy import energy
 from origami_jax.fold import drive, solve_fns
 from origami_jax.geometry import bar_lengths, fold_angles
-from origami_jax.solvers import Newton, Status
+from origami_jax.solvers import Dynamics, Newton, Status
 from origami_jax.solvers.base import (
     default_max_step,
     default_max_steps,
@@ -259,6 +259,12 @@ def test_finished_slots_take_the_next_problems():
         assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
         assert r.history["wall_time"][0] == 0.0 and r.history["iteration"][0] == 0
         assert r.history["iteration"][-1] == r.iterations
+
+
+def test_unstable_time_step_refused():
+    # the host checks every problem's start state before the loop runs
+    with pytest.raises(ValueError, match="exceeds the stability limit"):
+        fold_batch(MIURAS, solver=Dynamics(dt=1e3), progress=False)
 
 
 def test_bad_input():
