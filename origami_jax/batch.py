@@ -482,14 +482,17 @@ def fold_batch(
     if progress is not False:
         bar = ProgressBar(n, delay=0.0 if progress else 2.0, unit="problems")
     t_start = time.perf_counter()
-    solved = [0]
+    solved, compiling = [0], [0.0]
 
-    def finish(done: list[tuple[int, FoldResult]]) -> None:
+    def finish(done: list[tuple[int, FoldResult]], compile_time: float = 0.0) -> None:
+        """Store results; ``compile_time``: seconds a group spent compiling, which the rate
+        shown leaves out."""
         for index, result in done:
             results[index] = result
         solved[0] += len(done)
+        compiling[0] += compile_time
         if bar is not None:
-            rate = solved[0] / max(time.perf_counter() - t_start, 1e-9)
+            rate = solved[0] / max(time.perf_counter() - t_start - compiling[0], 1e-9)
             bar.update(solved[0], f"{rate:.0f}/s")
 
     try:
@@ -912,6 +915,7 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
             max(1, size // d // 2),  # entries and exits gathered half a device's slots wide
             (lanes, queue, nxt, count, outbox, np.int32(1), limits),
         )
+        finish([], compile_time)
         wall = np.zeros(q)  # seconds each row has run, up to its age ``aged``
         aged = np.zeros(q, np.int64)
         samples: dict[int, list] = {}
