@@ -540,21 +540,25 @@ def _host_problem(problems: list[Problem], axes, dtype) -> Problem:
     )
 
 
+def _specs(axes):
+    """Partition specs of a prefix tree of batch axes: axis 0 split along the devices, ``None``
+    (a shared leaf or subtree) the same on every device."""
+    split, copied = jax.sharding.PartitionSpec("batch"), jax.sharding.PartitionSpec()
+    return jax.tree.map(lambda a: split if a == 0 else copied, axes, is_leaf=lambda a: a is None)
+
+
+def _shardings(axes, devices: list):
+    """:func:`_specs` as shardings over ``devices``."""
+    mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
+    return jax.tree.map(lambda s: jax.sharding.NamedSharding(mesh, s), _specs(axes))
+
+
 def _to_devices(tree, axes, devices):
     """``tree`` on ``devices``: batched leaves (axis 0) split across them, shared ones (axis
     None) copied to each."""
     if len(devices) == 1:
         return jax.device_put(tree, devices[0])
-    mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
-    split = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
-    copied = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
-    shardings = jax.tree.map(
-        lambda a, leaf: jax.tree.map(lambda _: copied if a is None else split, leaf),
-        axes,
-        tree,
-        is_leaf=lambda a: a is None,
-    )
-    return jax.device_put(tree, shardings)
+    return jax.device_put(tree, _shardings(axes, devices))
 
 
 class _Lanes(NamedTuple):
@@ -771,20 +775,12 @@ def _sharded(fn, devices: list, in_axes: tuple, out_axes: tuple):
     if len(devices) == 1:
         return jax.jit(fn)
     mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
-    split, copied = jax.sharding.PartitionSpec("batch"), jax.sharding.PartitionSpec()
-
-    def specs(tree):
-        return jax.tree.map(
-            lambda a: split if a == 0 else copied, tree, is_leaf=lambda a: a is None
-        )
-
-    def shardings(tree):
-        return jax.tree.map(lambda s: jax.sharding.NamedSharding(mesh, s), specs(tree))
-
     fn = jax.shard_map(
-        fn, mesh=mesh, in_specs=specs(in_axes), out_specs=specs(out_axes), check_vma=False
+        fn, mesh=mesh, in_specs=_specs(in_axes), out_specs=_specs(out_axes), check_vma=False
     )
-    return jax.jit(fn, in_shardings=shardings(in_axes), out_shardings=shardings(out_axes))
+    return jax.jit(
+        fn, in_shardings=_shardings(in_axes, devices), out_shardings=_shardings(out_axes, devices)
+    )
 
 
 def _compiled_queue(solver, num_edges, axes, devices, width, args):

@@ -615,8 +615,8 @@ class Newton:
         keeps the next one on the convex part (exact attempts resume once the energy falls
         more slowly): near a zero-residual solution (rigid-foldable patterns) the convex part
         (Gauss-Newton) converges as fast as the exact Hessian, without the curvature terms'
-        cost. In ``fold_batch`` the curvature is then computed only while some member of the
-        chunk asks for it. 0: exact attempts after every full step. Measured on 2026-12-04
+        cost. In ``fold_batch`` the curvature is then computed only while some member in the
+        slots asks for it. 0: exact attempts after every full step. Measured on 2026-12-04
         (0 -> 0.5, same process order, 2 devices): 1,024 Miura-ori 4 x 4 variants 830-970 ->
         1,080-1,250 folds/s (7.13 -> 6.92 mean iterations), waterbomb 2 x 2 variants
         unchanged (430-510 -> 530-630 folds/s, 15.2 iterations, noise); single folds of the
