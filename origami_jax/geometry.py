@@ -186,9 +186,12 @@ def _skew(v: Array) -> Array:
 
 
 def dihedral_hessians(p: Array) -> Array:
-    """(H, 4, 3, 4, 3) Hessian of each hinge's fold angle with respect to its corners ``p``
-    (H, 4, 3): entry ``[h, a, i, b, j]`` is the derivative of coordinate ``i`` of corner ``a``'s
-    :func:`dihedral_gradients` along coordinate ``j`` of corner ``b``, in closed form.
+    """(H, 4, 4, 3, 3) Hessian of each hinge's fold angle with respect to its corners ``p``
+    (H, 4, 3), as 3 x 3 blocks of corner pairs: entry ``[h, a, b, i, j]`` is the derivative of
+    coordinate ``i`` of corner ``a``'s :func:`dihedral_gradients` along coordinate ``j`` of
+    corner ``b``, in closed form. Block-major, so that assembling a sparse Hessian moves whole
+    contiguous blocks (XLA's CPU transposes of such small dimensions cost several times the
+    assembly itself).
 
     The wings' gradients ``|e| n / |n|^2`` change with the axis length and with the normal,
     ``d n = [v] d x`` (``[v]`` the cross-product matrix of an edge of the wing); the axis
@@ -234,5 +237,5 @@ def dihedral_hessians(p: Array) -> Array:
         for k in range(4)
     ]
     start = [-(end[k] + left[k] + right[k]) for k in range(4)]
-    rows = [jnp.stack(r, axis=2) for r in (start, end, left, right)]  # (H, 3, 4, 3) each
+    rows = [jnp.stack(r, axis=1) for r in (start, end, left, right)]  # (H, 4, 3, 3) each
     return jnp.stack(rows, axis=1)

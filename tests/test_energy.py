@@ -160,7 +160,8 @@ def test_closed_form_dihedral_gradient_and_its_jacobian_match_autodiff():
         g, h = jax.vmap(jax.grad(one))(p), jax.vmap(jax.hessian(one))(p)
         got = dihedral_gradients(p), jax.vmap(jax.jacfwd(closed))(p)
         custom_got = jax.vmap(jax.grad(custom))(p), jax.vmap(jax.hessian(custom))(p)
-        return g, h, got, custom_got, (got[0], dihedral_hessians(p))
+        # dihedral_hessians is block-major [h, a, b, i, j]; jax.hessian gives [h, a, i, b, j]
+        return g, h, got, custom_got, (got[0], jnp.swapaxes(dihedral_hessians(p), 2, 3))
 
     g, h, *got = derivatives(p)
     scale_g = jnp.max(jnp.abs(g), axis=(1, 2), keepdims=True)

@@ -250,8 +250,8 @@ def _factor_batched(
     b, dtype = proj.shape[0], proj.dtype
     num = plan.block_vertices.shape[0]
     eye = jnp.eye(3, dtype=dtype)[None, :, :, None]
-    # (b, el, k, 3, k, 3) -> vertex blocks (b, el * k * k, 3, 3) -> stored blocks (N, 3, 3, b)
-    flat = jnp.concatenate([jnp.swapaxes(e, 3, 4).reshape(b, -1, 3, 3) for e in blocks], axis=1)
+    # (b, el, k, k, 3, 3) -> vertex blocks (b, el * k * k, 3, 3) -> stored blocks (N, 3, 3, b)
+    flat = jnp.concatenate([e.reshape(b, -1, 3, 3) for e in blocks], axis=1)
     parts = jnp.moveaxis(flat[:, plan.source], 0, -1)
     matrix = jnp.zeros((num, 3, 3, b), dtype).at[plan.target].add(parts)
     # gauge: P_i H_ik P_k for every block (P the identity but at pinned vertices), and a
@@ -328,7 +328,7 @@ def _batch_first(a: Array) -> Array:
 def factor(plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array) -> Factor:
     """Factor ``H + mu diag H + floor`` for the gauged Hessian ``H`` of one problem.
 
-    ``blocks`` the element Hessians (bars (E, 2, 3, 2, 3), then hinges (H, 4, 3, 4, 3), as
+    ``blocks`` the element Hessians (bars (E, 2, 2, 3, 3), then hinges (H, 4, 4, 3, 3), as
     :func:`origami_jax.solvers.newton.element_blocks` gives them); ``proj`` (V, 3, 3) each
     vertex's gauge projector (identity but at pinned vertices); ``scale`` the stiffness put on
     the pinned-out directions; ``mu`` the Levenberg-Marquardt shift relative to the diagonal.

@@ -105,6 +105,7 @@ __all__ = [
         "blocks",
         "block_vertices",
         "block_entries",
+        "vertex_blocks",
         "piece",
         "plan",
     ],
@@ -123,7 +124,8 @@ class HessianLayout:
     sparse into B stored blocks: ``blocks`` (K,) the stored block
     of each vertex block of the bars (E, 2, 2) then hinges (H, 4, 4), ``block_vertices`` (B, 2)
     the row and column vertex of each, ``block_entries`` the entry of the flat (B, 3, 3) blocks
-    that each CSR value takes (all three empty when dense).
+    that each CSR value takes, ``vertex_blocks`` (V, D) the stored blocks in each vertex's row
+    or column (padded with B) (all four empty when dense).
 
     ``piece`` (V,): the connected piece of each vertex, numbered as the gauge numbers its
     pinned triangles (by lowest vertex; -1 for a vertex on no bar).
@@ -140,6 +142,7 @@ class HessianLayout:
     blocks: Array
     block_vertices: Array
     block_entries: Array
+    vertex_blocks: Array
     piece: Array
     plan: BlockPlan | None = None
 
@@ -262,9 +265,11 @@ def layout_arrays(
         block = np.searchsorted(block_keys, (r // 3) * v + c // 3)
         block_entries = (block * 9 + (r % 3) * 3 + c % 3).astype(np.int32)
         block_vertices = vertex_order[np.stack([block_keys // v, block_keys % v], axis=1)]
+        vertex_blocks = _vertex_blocks(block_vertices, v)
     else:
         slot, indptr, indices = keys, none, none
         blocks, block_vertices, block_entries = none, np.zeros((0, 2), np.int32), none
+        vertex_blocks = np.zeros((0, 0), np.int32)
     m = len(rows)
     return HessianLayout(
         piece=_vertex_pieces(bars, v),
@@ -275,13 +280,31 @@ def layout_arrays(
         blocks=blocks.astype(np.int32),
         block_vertices=block_vertices.astype(np.int32),
         block_entries=block_entries,
+        vertex_blocks=vertex_blocks.astype(np.int32),
     )
+
+
+def _vertex_blocks(block_vertices: np.ndarray, v: int) -> np.ndarray:
+    """(V, D) the blocks whose row or column vertex is each vertex, padded with the block
+    count."""
+    num = len(block_vertices)
+    ids = np.arange(num)
+    off = block_vertices[:, 0] != block_vertices[:, 1]
+    vertex = np.concatenate([block_vertices[:, 0], block_vertices[off, 1]])
+    block = np.concatenate([ids, ids[off]])
+    order = np.argsort(vertex, kind="stable")
+    vertex, block = vertex[order], block[order]
+    counts = np.bincount(vertex, minlength=v)
+    out = np.full((v, max(int(counts.max(initial=0)), 1)), num)
+    out[vertex, np.arange(len(vertex)) - np.repeat(np.cumsum(counts) - counts, counts)] = block
+    return out
 
 
 def element_blocks(
     x: Array, structure: Structure, params, reference: Array, exact: Array | bool
 ) -> list[Array]:
-    """The element Hessians: bars (E, 2, 3, 2, 3), then hinges (H, 4, 3, 4, 3) if any.
+    """The element Hessians as 3 x 3 blocks of vertex pairs: bars (E, 2, 2, 3, 3), then hinges
+    (H, 4, 4, 3, 3) if any (``[e, a, b]`` the block of rows of corner ``a``, columns of ``b``).
 
     ``exact`` selects the exact Hessian; otherwise its convex part (compressive bar term and
     the hinges' ``(rho - goal) hess(rho)`` term dropped), positive semi-definite.
@@ -298,13 +321,13 @@ def element_blocks(
     outer = dh[:, :, None] * dh[:, None, :]
     a = k[:, None, None] * (outer + transverse[:, None, None] * (jnp.eye(3, dtype=dtype) - outer))
     sign = jnp.array([[1.0, -1.0], [-1.0, 1.0]], dtype)
-    out = [sign[None, :, None, :, None] * a[:, None, :, None, :]]
+    out = [sign[None, :, :, None, None] * a[:, None, None]]
     if structure.hinges.shape[0]:
         goal, stiffness = hinge_goals(structure, params)
         q = x[structure.hinges]
         g = dihedral_gradients(q)
         kl = (stiffness * l0[structure.hinge_bars])[:, None, None, None, None]
-        gg = g[:, :, :, None, None] * g[:, None, None, :, :]
+        gg = g[:, :, None, :, None] * g[:, None, :, None, :]
 
         def with_curvature(weight=1.0):
             # the angle's own Hessian is most of an iteration's work on small patterns: only
@@ -339,20 +362,6 @@ def _any_member(flag: Array) -> Array:
 @_any_member.def_vmap
 def _any_member_vmap(axis_size, in_batched, flag):
     return (jnp.any(flag), False) if in_batched[0] else (flag, False)
-
-
-def _scatter_blocks(out: Array, blocks: Array, index: Array) -> Array:
-    """Add element Hessians ``blocks`` (num, k, 3, k, 3) into ``out`` at 3 x 3 blocks: ``index``
-    (num, k, k, d) the leading coordinates of each in ``out`` (d of them, the rest 3 x 3). One
-    index per block and no transpose of the blocks (XLA's CPU transposes of such small dims
-    cost more than the scatter)."""
-    lead = (0, 2) if index.shape[-1] == 2 else (0,)
-    dims = jax.lax.ScatterDimensionNumbers(
-        update_window_dims=(2, 4), inserted_window_dims=lead, scatter_dims_to_operand_dims=lead
-    )
-    return jax.lax.scatter_add(
-        out, index, blocks, dims, mode=jax.lax.GatherScatterMode.PROMISE_IN_BOUNDS
-    )
 
 
 def _vertex_projectors(v: int, pinned: Array, projectors: Array) -> Array:
@@ -393,19 +402,25 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
         proj = _vertex_projectors(v, problem.pinned, problem.projectors)
         num = layout.block_vertices.shape[0]
         matrix, start = jnp.zeros((num, 3, 3), x.dtype), 0
-        for part, e in zip(blocks, elements, strict=True):
-            k = e.shape[1]
-            index = layout.blocks[start : start + e.shape[0] * k * k].reshape(-1, k, k, 1)
-            matrix = _scatter_blocks(matrix, part, index)
-            start += e.shape[0] * k * k
-        rows, cols = proj[layout.block_vertices[:, 0]], proj[layout.block_vertices[:, 1]]
-        matrix = jnp.sum(rows[:, :, :, None] * matrix[:, None], axis=2)
-        matrix = jnp.sum(matrix[:, :, :, None] * cols[:, None], axis=2)
+        for part in blocks:  # each part on its own: a concatenation would copy them all
+            part = part.reshape(-1, 3, 3)
+            index = layout.blocks[start : start + part.shape[0]]
+            matrix = matrix.at[index].add(part, mode="promise_in_bounds")
+            start += part.shape[0]
+        # only the pinned vertices' rows and columns change (a block of two pinned vertices
+        # is listed twice and set twice to the same value)
+        touched = layout.vertex_blocks[problem.pinned].reshape(-1)
+        ends = layout.block_vertices.at[touched].get(mode="fill", fill_value=0)
+        rows, cols = proj[ends[:, 0]], proj[ends[:, 1]]
+        part = matrix.at[touched].get(mode="fill", fill_value=0.0)
+        part = jnp.sum(rows[:, :, :, None] * part[:, None], axis=2)
+        part = jnp.sum(part[:, :, :, None] * cols[:, None], axis=2)
+        matrix = matrix.at[touched].set(part, mode="drop")
         return matrix.reshape(-1)[layout.block_entries]
-    matrix = jnp.zeros((v, 3, v, 3), x.dtype)
+    matrix = jnp.zeros((v, v, 3, 3), x.dtype)
     for part, e in zip(blocks, elements, strict=True):
-        index = jnp.stack(jnp.broadcast_arrays(e[:, :, None], e[:, None, :]), axis=-1)
-        matrix = _scatter_blocks(matrix, part, index)
+        matrix = matrix.at[e[:, :, None], e[:, None, :]].add(part, mode="promise_in_bounds")
+    matrix = jnp.swapaxes(matrix, 1, 2)  # (V, 3, V, 3)
     return _project_pinned(matrix, problem.pinned, problem.projectors).reshape(-1)
 
 
