@@ -155,8 +155,9 @@ def test_an_exact_hessian_that_does_not_factor_hands_over_within_the_iteration()
 
 def test_the_hand_over_takes_the_same_steps_as_an_iteration_spent():
     """A sparse fold hands failed exact attempts over within the iteration; a dense one spends
-    an iteration on each: the same end, in fewer iterations (Miura-ori 10 x 10: 12 -> 10; with
-    exact attempts after every full step, as ``convex_rate=0`` makes them)."""
+    an iteration on each: the same end, in fewer iterations (Miura-ori 10 x 10; with exact
+    attempts after every unexpanded full step, as ``convex_rate=0``, the default, makes
+    them)."""
     cp = patterns.miura_ori(10, 10)
     dense = fold(cp, solver=Newton(linear_solver="dense", convex_rate=0.0), tol=1e-10)
     sparse = fold(cp, solver=Newton(linear_solver="sparse", convex_rate=0.0), tol=1e-10)

@@ -9,9 +9,15 @@ Hessian can be indefinite, so the method works with two matrices:
   (negative) transverse term dropped, and each hinge's Gauss-Newton term
   ``k l0 grad(rho) grad(rho)^T``, which drops ``k l0 (rho - goal) hess(rho)``;
 * the **exact Hessian**, tried once the previous iteration took the full, unlimited Newton step
-  (the quadratic region) without cutting the energy to below ``convex_rate`` of its value, and
-  kept as long as it gives a descent step that the line search accepts whole (and the energy
-  falls more slowly than that); otherwise the iteration falls back to the convex part. An
+  and no longer one (the quadratic region: a step that the line search could double, see
+  ``expansions``, shows the convex part still overstating the curvature, where the exact
+  Hessian is mostly indefinite), and kept as long as it gives a descent step that the line
+  search accepts whole; otherwise the iteration falls back to the convex part. Waiting for an
+  unexpanded step, measured on 2026-12-04: 1,024 waterbomb 2 x 2 variants (``fold_batch``)
+  15.2 -> 13.2 mean iterations; single folds of the benchmark scenes and shared files equal
+  or fewer iterations but for a few (box.fold 61 -> 52, BoxPleatInOutWave 154 -> 139,
+  Miura-ori 30 x 30 14 -> 12, 100 x 100 16 -> 15; popupSimple 20 -> 28, flappingBird
+  52 -> 60). An
   exact Hessian that does not factor (not positive definite) hands over to the convex part
   within the same iteration when it is factored on the host (sparse, large patterns: an
   iteration less each, Miura-ori 30 x 30 14 -> 11, 100 x 100 20 -> 17); dense, the failed
@@ -615,7 +621,8 @@ class Newton:
         doubled Newton step raises the energy and is not taken. Each doubling tried costs one
         energy evaluation. Measured on 2026-12-03 (with gauge-free steps): the Kresling
         25 -> 23 iterations, Origami Simulator's BoxPleatInOutWave 218 -> 165; but Miura-ori
-        100 x 100 15 -> 20 (30 x 30: 14 either way).
+        100 x 100 15 -> 20 (30 x 30: 14 either way). A doubled step also postpones the next
+        exact attempt (see the module docstring).
       free_turn: a step whose rigid part turns a piece by more than this (radians per unit
         step) is taken free of the gauge and the result reframed. Pinned, a step turns the
         whole sheet about one triangle by a linearized rotation, which stretches it: on a
@@ -629,14 +636,13 @@ class Newton:
       convex_rate: an iteration that lowers the energy to below this fraction of its value
         keeps the next one on the convex part (exact attempts resume once the energy falls
         more slowly): near a zero-residual solution (rigid-foldable patterns) the convex part
-        (Gauss-Newton) converges as fast as the exact Hessian, without the curvature terms'
-        cost. In ``fold_batch`` the curvature is then computed only while some member in the
-        slots asks for it. 0: exact attempts after every full step. Measured on 2026-12-04
-        (0 -> 0.5, same process order, 2 devices): 1,024 Miura-ori 4 x 4 variants 830-970 ->
-        1,080-1,250 folds/s (7.13 -> 6.92 mean iterations), waterbomb 2 x 2 variants
-        unchanged (430-510 -> 530-630 folds/s, 15.2 iterations, noise); single folds of the
-        benchmark scenes and shared files kept their status and error, iterations equal or
-        fewer (popupSimple 25 -> 20, 100 x 100 17 -> 16) except Miura-ori 30 x 30 11 -> 14.
+        (Gauss-Newton) converges about as fast as the exact Hessian, without the curvature
+        terms' cost. 0 (the default): exact attempts after every unexpanded full step. Before
+        exact attempts waited for an unexpanded step, 0.5 was the default (measured on
+        2026-12-04, 0 -> 0.5: 1,024 Miura-ori 4 x 4 variants 7.13 -> 6.92 mean iterations);
+        since, on 2026-12-04, 0.5 -> 0: Miura-ori 100 x 100 19 -> 15 iterations (3.2 -> 2.8 s),
+        30 x 30 14 -> 12; the Miura-ori variants 6.87 -> 6.79, the waterbomb variants 13.16 ->
+        13.23 mean iterations; popupSimple 20 -> 28.
       max_linesearch_steps: halvings of the step before an iteration gives up.
       max_stalls: iterations in a row without a step before giving up (STALLED).
       patience: iterations with neither a new lowest energy (lower by more than the energy's
@@ -650,7 +656,7 @@ class Newton:
     acceleration: float = 10.0
     expansions: int = 3
     free_turn: float = 1e-3
-    convex_rate: float = 0.5
+    convex_rate: float = 0.0
     max_linesearch_steps: int = 40
     max_stalls: int = 12
     patience: int = 30
@@ -781,8 +787,8 @@ class Newton:
 
     def _attempt(self, s: NewtonState, problem: Problem, exact: Array):
         """Step, limit, backtracking and expansion: (u, energy, accepted, full step taken,
-        the energy's rounding noise at the start, whether the exact Hessian was factored: see
-        ``_factor``).
+        the energy's rounding noise at the start, whether the exact Hessian was factored (see
+        ``_factor``), whether the step was doubled).
 
         A step that turns the sheet is taken free of the gauge (see ``free_turn``): its
         infinitesimal rigid motion removed (:func:`rigid_free`), the new positions then moved
@@ -872,7 +878,7 @@ class Newton:
             alpha, value, _, _ = jax.lax.while_loop(grow, double, (alpha, value, True, 0))
         end = point(alpha)
         u = jnp.where(unpin, reframe(end, problem), end) - problem.start
-        return u, value, accepted, full, noise, used_exact
+        return u, value, accepted, full, noise, used_exact, alpha > 1
 
     def _acceleration(self, s: NewtonState, problem: Problem, x, velocity: Array, solve) -> Array:
         """``a = -H^-1 J^T W r''[v, v]`` at positions ``x`` (zero when too large or not
@@ -898,7 +904,7 @@ class Newton:
         # one step tried per iteration: a rejected exact attempt costs the iteration and the
         # next one is convex (but on the host an exact Hessian that does not factor hands over
         # within it: see ``_factor``)
-        u, value, accepted, full, noise, used_exact = self._attempt(s, problem, s.exact)
+        u, value, accepted, full, noise, used_exact, expanded = self._attempt(s, problem, s.exact)
         exact_ran = s.exact & used_exact
         retry = exact_ran & ~accepted  # rejected, and no convex step tried yet
         rejected = retry | (s.exact & ~used_exact)
@@ -941,7 +947,9 @@ class Newton:
             grad_max0=s.grad_max0,
             status=status,
             mu=mu,
-            exact=take & ~fast & (exact_ran | (full & (cooldown == 0))),
+            # an exact attempt after an exact step taken, or after a full convex step that was
+            # not doubled (a doubled one: far from the quadratic region)
+            exact=take & ~fast & (exact_ran | (full & ~expanded & (cooldown == 0))),
             stalls=stalls,
             failures=failures.astype(s.failures.dtype),
             cooldown=cooldown.astype(s.cooldown.dtype),
