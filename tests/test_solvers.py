@@ -336,9 +336,11 @@ def test_sparse_assembly_matches_dense():
         want = np.asarray(gauged_hessian(x, dense, ref, exact)).reshape(n, n)
         scale = np.abs(want).max()
         assert np.abs(got[np.ix_(order, order)] - want).max() <= 1e-14 * scale
-        # the projection changed something: the pinned directions carry the gauge's identity
-        pinned = np.asarray(problem.pinned)
-        assert np.abs(want[3 * pinned[0] : 3 * pinned[0] + 3]).max() > 0
+        # the gauge: the fully pinned vertex's rows hold only the identity on its own block
+        a = 3 * int(problem.pinned[0])
+        rows = got[np.ix_(order, order)][a : a + 3]
+        assert np.abs(np.delete(rows, np.s_[a : a + 3], axis=1)).max() == 0.0
+        assert np.abs(rows[:, a : a + 3]).max() > 0.0
 
 
 def test_block_sparse_solve_matches_dense():

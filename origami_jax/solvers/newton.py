@@ -13,7 +13,8 @@ Hessian can be indefinite, so the method works with two matrices:
   ``expansions``, shows the convex part still overstating the curvature, where the exact
   Hessian is mostly indefinite), and kept as long as it gives a descent step that the line
   search accepts whole; otherwise the iteration falls back to the convex part. Waiting for an
-  unexpanded step, measured on 2026-12-04: 1,024 waterbomb 2 x 2 variants (``fold_batch``)
+  unexpanded step (with ``convex_rate`` 0, see there), measured on 2026-12-04 against stop 26:
+  1,024 waterbomb 2 x 2 variants (``fold_batch``)
   15.2 -> 13.2 mean iterations; single folds of the benchmark scenes and shared files equal
   or fewer iterations but for a few (box.fold 61 -> 52, BoxPleatInOutWave 154 -> 139,
   Miura-ori 30 x 30 14 -> 12, 100 x 100 16 -> 15; popupSimple 20 -> 28, flappingBird
