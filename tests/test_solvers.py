@@ -167,8 +167,9 @@ def test_the_hand_over_takes_the_same_steps_as_an_iteration_spent():
 
 
 def test_host_sparse_backends_agree_and_fail_cleanly(monkeypatch):
-    """CHOLMOD (when cvxopt is installed) and SuperLU give the same solution; a matrix that is
-    not positive definite gives ok=False and zeros; a kept factorization solves once."""
+    """CHOLMOD (when cvxopt is installed) and SuperLU give the same solution of a symmetric
+    matrix given by its upper triangle; a matrix that is not positive definite gives ok=False
+    and zeros; a kept factorization solves once."""
     import scipy.sparse as sp
 
     from origami_jax.solvers import hostsparse
@@ -176,8 +177,10 @@ def test_host_sparse_backends_agree_and_fail_cleanly(monkeypatch):
     rng = np.random.default_rng(3)
     m = sp.random(40, 40, density=0.1, random_state=4)
     a = (m @ m.T + 2 * sp.eye(40)).tocsr()
-    a.sort_indices()
-    args = (a.indptr.astype(np.int32), a.indices.astype(np.int32), a.data)
+    upper = sp.triu(a).tocsr()
+    upper.sort_indices()
+    assert upper.nnz < a.nnz  # the lower triangle is left out
+    args = (upper.indptr.astype(np.int32), upper.indices.astype(np.int32), upper.data)
     b = rng.normal(size=40)
     exact = np.linalg.solve(a.toarray(), b)
     x, ok = hostsparse.solve(*args, b)
@@ -187,7 +190,7 @@ def test_host_sparse_backends_agree_and_fail_cleanly(monkeypatch):
     assert np.allclose(hostsparse.resolve(token, -b), -exact, rtol=1e-10)
     assert np.all(np.isnan(hostsparse.resolve(token, b)))  # released
     middle = np.median(np.linalg.eigvalsh(a.toarray()))
-    indefinite = (a - middle * sp.eye(40)).tocsr()
+    indefinite = sp.triu(a - middle * sp.eye(40)).tocsr()
     indefinite.sort_indices()
     x3, ok3, token3 = hostsparse.factor_solve(
         indefinite.indptr.astype(np.int32),
@@ -197,7 +200,7 @@ def test_host_sparse_backends_agree_and_fail_cleanly(monkeypatch):
         keep=True,
     )
     assert not ok3 and token3 == 0 and np.all(x3 == 0)
-    nan = a.data.copy()
+    nan = upper.data.copy()
     nan[5] = np.nan
     assert not hostsparse.solve(args[0], args[1], nan, b)[1]
     monkeypatch.setattr(hostsparse, "_cholmod", None)  # the SuperLU fallback
@@ -307,9 +310,11 @@ def test_newton_dense_step_vmaps_over_percent():
 
 
 def test_sparse_assembly_matches_dense():
-    """The sparse Hessian (whole 3 x 3 blocks scattered, only the pinned vertices' blocks
-    projected) equals the dense one entry for entry, exact and convex, away from the flat
-    state (every block nonzero, the pinned triangle's among them)."""
+    """The sparse Hessian (its upper triangle: the corner pairs a <= b of each element, whole
+    3 x 3 blocks scattered, those whose corners the order swaps into a transposed copy; only
+    the pinned vertices' blocks projected) equals the dense one entry for entry, exact and
+    convex, away from the flat state (every block nonzero, the pinned triangle's among
+    them)."""
     import scipy.sparse as sp
 
     from origami_jax.energy import initial_reference
@@ -327,11 +332,15 @@ def test_sparse_assembly_matches_dense():
     dense = dataclasses.replace(problem, aux=hessian_layout(mesh, structure, sparse=False))
     layout = sparse.aux
     assert int(layout.vertex_blocks.shape[0]) == mesh.num_vertices
+    num = layout.block_vertices.shape[0]
+    assert 0 < np.sum(np.asarray(layout.blocks) >= num) < len(layout.blocks)  # some swapped
     for exact in (True, False):
         values = np.asarray(gauged_hessian(x, sparse, ref, exact))
-        got = sp.csr_matrix(
+        upper = sp.csr_matrix(
             (values, np.asarray(layout.indices), np.asarray(layout.indptr)), shape=(n, n)
         ).toarray()
+        assert np.all(np.tril(upper, -1) == 0)  # only the upper triangle is stored
+        got = upper + np.triu(upper, 1).T
         order = np.asarray(layout.order)
         want = np.asarray(gauged_hessian(x, dense, ref, exact)).reshape(n, n)
         scale = np.abs(want).max()

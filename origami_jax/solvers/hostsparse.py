@@ -1,7 +1,9 @@
 """Sparse Cholesky of a Newton system on the host, called from ``jit`` through ``pure_callback``.
 
-The matrix comes as full symmetric CSR arrays ``(indptr, indices, data)`` already in a
-fill-reducing order (the nested dissection of :func:`origami_jax.solvers.newton.hessian_layout`).
+The symmetric matrix comes as CSR arrays ``(indptr, indices, data)`` of its **upper triangle**
+(diagonal included; the same arrays are the lower triangle's CSC, which CHOLMOD reads), already
+in a fill-reducing order (the nested dissection of
+:func:`origami_jax.solvers.newton.hessian_layout`).
 Two backends, picked once:
 
 * **CHOLMOD** (supernodal Cholesky, from ``cvxopt`` when it is installed:
@@ -54,12 +56,11 @@ class _Cholmod:
         n = indptr.shape[0] - 1
         self.indptr, self.indices = indptr.copy(), indices.copy()
         rows = np.repeat(np.arange(n), np.diff(indptr))
-        # CSR's upper triangle, row by row, is the lower triangle's CSC (symmetric matrix)
-        self.upper = np.flatnonzero(indices >= rows)
+        # the upper triangle's CSR, row by row, is the lower triangle's CSC
         self.matrix = _cvx_spmatrix(
-            np.zeros(len(self.upper)),
-            _cvx_matrix(indices[self.upper].astype(np.int32)),
-            _cvx_matrix(rows[self.upper].astype(np.int32)),
+            np.zeros(len(indices)),
+            _cvx_matrix(indices.astype(np.int32)),
+            _cvx_matrix(rows.astype(np.int32)),
             (n, n),
         )
         self.identity = _cvx_matrix(np.arange(n, dtype=np.int32))
@@ -75,7 +76,7 @@ class _Cholmod:
                 symbolic = self.free.pop()
             else:
                 symbolic = _cholmod.symbolic(self.matrix, p=self.identity)
-            self.matrix.V = _cvx_matrix(np.ascontiguousarray(data[self.upper], np.float64))
+            self.matrix.V = _cvx_matrix(np.ascontiguousarray(data, np.float64))
             try:
                 _cholmod.numeric(self.matrix, symbolic)
             except ArithmeticError:  # not positive definite
@@ -137,11 +138,13 @@ def _factor(indptr, indices, data):
 
 
 def superlu(indptr, indices, data) -> tuple[spla.SuperLU, np.ndarray] | None:
-    """SuperLU of the symmetric matrix in its given order, without pivoting, and its pivots
-    (``U``'s diagonal, which is ``D`` of ``L D L^T``); ``None`` if it does not factor."""
+    """SuperLU of the symmetric matrix (given by its upper triangle) in its given order, without
+    pivoting, and its pivots (``U``'s diagonal, which is ``D`` of ``L D L^T``); ``None`` if it
+    does not factor."""
     n = indptr.shape[0] - 1
     try:
-        matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n)).tocsc()
+        upper = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+        matrix = (upper + sp.triu(upper, k=1).T).tocsc()
         lu = spla.splu(
             matrix, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
         )

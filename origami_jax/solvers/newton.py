@@ -124,15 +124,21 @@ class HessianLayout:
 
     ``order`` (3V,) position of each degree of freedom in the solved system (a fill-reducing
     order for the sparse solve); ``diag_blocks`` (V, 3, 3) the storage slots of each vertex's
-    diagonal block. Sparse: ``indptr``/``indices`` the symmetric CSR pattern in that order and
-    slots index its data. Dense: both empty and slots index the flat matrix.
+    diagonal block. Sparse: ``indptr``/``indices`` the CSR pattern of the **upper triangle**
+    in that order (the matrix is symmetric: the host factorization reads only that half, which
+    halves the assembly) and slots index its data; a diagonal block's entries below the
+    diagonal have the slot past the end (dropped). Dense: both empty and slots index the flat
+    matrix.
 
     The solver scatters 3 x 3 vertex blocks, dense straight into the (V, 3, V, 3) matrix;
-    sparse into B stored blocks: ``blocks`` (K,) the stored block
-    of each vertex block of the bars (E, 2, 2) then hinges (H, 4, 4), ``block_vertices`` (B, 2)
-    the row and column vertex of each, ``block_entries`` the entry of the flat (B, 3, 3) blocks
-    that each CSR value takes, ``vertex_blocks`` (V, D) the stored blocks in each vertex's row
-    or column (padded with B) (all four empty when dense).
+    sparse into B stored blocks, one per vertex pair ``(i, j)``, ``i`` first in the order,
+    twice: ``blocks`` (K,) the stored block of each corner pair ``a <= b`` of the bars (E, 3)
+    then hinges (H, 10) (:data:`UPPER_PAIRS`), plus B where the corners come in the other
+    order (a second copy that holds transposed blocks: no transpose of the element blocks),
+    ``block_vertices`` (B, 2) the row and column vertex of each, ``block_entries`` (N, 2) the
+    two entries of the flat (2B, 3, 3) blocks whose sum each CSR value takes,
+    ``vertex_blocks`` (V, D) the stored blocks in each vertex's row or column (padded with 2B)
+    (all four empty when dense).
 
     ``piece`` (V,): the connected piece of each vertex, numbered as the gauge numbers its
     pinned triangles (by lowest vertex; -1 for a vertex on no bar).
@@ -166,9 +172,9 @@ class HessianLayout:
         return int(self.indices.shape[0]) if self.sparse else self.size**2
 
 
-def _element_dofs(elements: np.ndarray) -> np.ndarray:
-    """(n_el, 3 * k) degrees of freedom of elements given by k vertex indices each."""
-    return (elements[:, :, None] * 3 + np.arange(3)).reshape(len(elements), -1)
+# the corner pairs (a, b), a <= b, of an element of 2 (bar) or 4 (hinge) corners: the upper
+# triangle of its symmetric Hessian, all that the sparse assembly computes
+UPPER_PAIRS = {k: [(a, b) for a in range(k) for b in range(a, k)] for k in (2, 4)}
 
 
 def _element_pairs(elements: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -247,8 +253,7 @@ def layout_arrays(
     else dense (slots index the flat 3V x 3V matrix)."""
     v = num_vertices
     n = 3 * v
-    elements = [bars] + ([hinges] if len(hinges) else [])
-    rows, cols = _element_pairs([_element_dofs(e) for e in elements])
+    parts = [bars] + ([hinges] if len(hinges) else [])
     diag = np.arange(v)[:, None, None] * 3 + np.arange(3)
     diag_r = np.broadcast_to(diag, (v, 3, 3)).ravel()
     diag_c = np.broadcast_to(diag.transpose(0, 2, 1), (v, 3, 3)).ravel()
@@ -259,41 +264,55 @@ def layout_arrays(
         order = (rank[:, None] * 3 + np.arange(3)).ravel()
     else:
         order = np.arange(n)
-    keys = order[np.concatenate([rows, diag_r])] * n + order[np.concatenate([cols, diag_c])]
     none = np.zeros(0, np.int32)
     if sparse:
-        vr, vc = _element_pairs(elements)
-        unique, slot = np.unique(keys, return_inverse=True)
-        indptr = np.searchsorted(unique // n, np.arange(n + 1)).astype(np.int32)
-        indices = (unique % n).astype(np.int32)
-        # every stored entry lies in a stored 3 x 3 block (rank-ordered vertex pairs)
-        block_keys, blocks = np.unique(rank[vr] * v + rank[vc], return_inverse=True)
-        r, c = unique // n, unique % n
-        block = np.searchsorted(block_keys, (r // 3) * v + c // 3)
-        block_entries = (block * 9 + (r % 3) * 3 + c % 3).astype(np.int32)
-        block_vertices = vertex_order[np.stack([block_keys // v, block_keys % v], axis=1)]
-        vertex_blocks = _vertex_blocks(block_vertices, v)
+        # the corner pairs a <= b of every element (in turn), and the stored block (the vertex
+        # pair, first in the order first) each goes to, transposed when the order swaps them
+        vr, vc = (
+            np.concatenate([e[:, [p[k] for p in UPPER_PAIRS[e.shape[1]]]].ravel() for e in parts])
+            for k in (0, 1)
+        )
+        lo, hi = np.minimum(rank[vr], rank[vc]), np.maximum(rank[vr], rank[vc])
+        diagonal = np.arange(v) * (v + 1)  # every vertex has its diagonal block
+        block_keys, blocks = np.unique(np.concatenate([lo * v + hi, diagonal]), return_inverse=True)
+        num = len(block_keys)
+        blocks = blocks[: len(vr)] + num * (rank[vr] > rank[vc])
+        bi, bj = block_keys // v, block_keys % v
+        # the upper triangle's entries, block by block: all 9 off the diagonal, 6 on it
+        i, j = np.divmod(np.arange(9), 3)
+        keep = (bi[:, None] < bj[:, None]) | (i <= j)[None, :]
+        block, entry = np.nonzero(keep)
+        r, c = 3 * bi[block] + i[entry], 3 * bj[block] + j[entry]
+        sort = np.argsort(r * n + c, kind="stable")
+        r, c, block, entry = r[sort], c[sort], block[sort], entry[sort]
+        indptr = np.searchsorted(r, np.arange(n + 1)).astype(np.int32)
+        indices = c.astype(np.int32)
+        i, j = np.divmod(entry, 3)
+        block_entries = np.stack([block * 9 + entry, (num + block) * 9 + j * 3 + i], axis=1)
+        stored, wanted = r * n + c, order[diag_r] * n + order[diag_c]
+        at = np.minimum(np.searchsorted(stored, wanted), len(r) - 1)
+        diag_blocks = np.where(stored[at] == wanted, at, len(r)).reshape(v, 3, 3)
+        block_vertices = vertex_order[np.stack([bi, bj], axis=1)]
+        vertex_blocks = _vertex_blocks(block_vertices, v, 2 * num)
     else:
-        slot, indptr, indices = keys, none, none
-        blocks, block_vertices, block_entries = none, np.zeros((0, 2), np.int32), none
-        vertex_blocks = np.zeros((0, 0), np.int32)
-    m = len(rows)
+        diag_blocks = (diag_r * n + diag_c).reshape(v, 3, 3)
+        indptr, indices, blocks, block_entries = none, none, none, np.zeros((0, 2), np.int32)
+        block_vertices, vertex_blocks = np.zeros((0, 2), np.int32), np.zeros((0, 0), np.int32)
     return HessianLayout(
         piece=_vertex_pieces(bars, v),
         order=order.astype(np.int32),
-        diag_blocks=slot[m:].reshape(v, 3, 3).astype(np.int32),
+        diag_blocks=diag_blocks.astype(np.int32),
         indptr=indptr,
         indices=indices,
         blocks=blocks.astype(np.int32),
         block_vertices=block_vertices.astype(np.int32),
-        block_entries=block_entries,
+        block_entries=block_entries.astype(np.int32),
         vertex_blocks=vertex_blocks.astype(np.int32),
     )
 
 
-def _vertex_blocks(block_vertices: np.ndarray, v: int) -> np.ndarray:
-    """(V, D) the blocks whose row or column vertex is each vertex, padded with the block
-    count."""
+def _vertex_blocks(block_vertices: np.ndarray, v: int, pad: int) -> np.ndarray:
+    """(V, D) the blocks whose row or column vertex is each vertex, padded with ``pad``."""
     num = len(block_vertices)
     ids = np.arange(num)
     off = block_vertices[:, 0] != block_vertices[:, 1]
@@ -302,16 +321,22 @@ def _vertex_blocks(block_vertices: np.ndarray, v: int) -> np.ndarray:
     order = np.argsort(vertex, kind="stable")
     vertex, block = vertex[order], block[order]
     counts = np.bincount(vertex, minlength=v)
-    out = np.full((v, max(int(counts.max(initial=0)), 1)), num)
+    out = np.full((v, max(int(counts.max(initial=0)), 1)), pad)
     out[vertex, np.arange(len(vertex)) - np.repeat(np.cumsum(counts) - counts, counts)] = block
     return out
 
 
 def element_blocks(
-    x: Array, structure: Structure, params, reference: Array, exact: Array | bool
+    x: Array,
+    structure: Structure,
+    params,
+    reference: Array,
+    exact: Array | bool,
+    upper: bool = False,
 ) -> list[Array]:
     """The element Hessians as 3 x 3 blocks of vertex pairs: bars (E, 2, 2, 3, 3), then hinges
-    (H, 4, 4, 3, 3) if any (``[e, a, b]`` the block of rows of corner ``a``, columns of ``b``).
+    (H, 4, 4, 3, 3) if any (``[e, a, b]`` the block of rows of corner ``a``, columns of ``b``);
+    with ``upper`` only the pairs ``a <= b`` of :data:`UPPER_PAIRS`: (E, 3, 3, 3), (H, 10, 3, 3).
 
     ``exact`` selects the exact Hessian; otherwise its convex part (compressive bar term and
     the hinges' ``(rho - goal) hess(rho)`` term dropped), positive semi-definite.
@@ -328,23 +353,34 @@ def element_blocks(
     outer = dh[:, :, None] * dh[:, None, :]
     a = k[:, None, None] * (outer + transverse[:, None, None] * (jnp.eye(3, dtype=dtype) - outer))
     sign = jnp.array([[1.0, -1.0], [-1.0, 1.0]], dtype)
-    out = [sign[None, :, :, None, None] * a[:, None, None]]
+    if upper:
+        first, second = (np.array(c) for c in zip(*UPPER_PAIRS[2], strict=True))
+        out = [sign[first, second][None, :, None, None] * a[:, None]]
+    else:
+        out = [sign[None, :, :, None, None] * a[:, None, None]]
     if structure.hinges.shape[0]:
         goal, stiffness = hinge_goals(structure, params)
         q = x[structure.hinges]
         g = dihedral_gradients(q)
-        kl = (stiffness * l0[structure.hinge_bars])[:, None, None, None, None]
-        gg = g[:, :, None, :, None] * g[:, None, :, None, :]
+        pairs = UPPER_PAIRS[4] if upper else None
+        pad = (slice(None),) + (None,) * (3 if upper else 4)
+        kl = (stiffness * l0[structure.hinge_bars])[pad]
+
+        def gauss_newton():  # in each branch: computed once, where it is used
+            if upper:
+                first, second = (np.array(c) for c in zip(*pairs, strict=True))
+                return kl * (g[:, first, :, None] * g[:, second, None, :])
+            return kl * (g[:, :, None, :, None] * g[:, None, :, None, :])
 
         def with_curvature(weight=1.0):
             # the angle's own Hessian is most of an iteration's work on small patterns: only
             # when asked
             rho = dihedral_angles(q, reference)
-            h = dihedral_hessians(q)
-            return kl * (gg + (weight * (rho - goal))[:, None, None, None, None] * h)
+            h = dihedral_hessians(q, pairs)
+            return gauss_newton() + (kl * weight * (rho - goal)[pad]) * h
 
         if isinstance(exact, bool):
-            out.append(with_curvature() if exact else kl * gg)
+            out.append(with_curvature() if exact else gauss_newton())
         else:
             # vmapped (fold_batch), a cond on each member's flag would run both branches; on
             # whether any member wants the curvature it runs one, and the members that do not
@@ -353,7 +389,7 @@ def element_blocks(
                 jax.lax.cond(
                     _any_member(exact),
                     lambda: with_curvature(exact.astype(dtype)),
-                    lambda: kl * gg,
+                    gauss_newton,
                 )
             )
     return out
@@ -402,13 +438,13 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
     equals projecting every element block, at a fraction of the cost."""
     layout: HessianLayout = problem.aux
     structure = problem.structure
-    blocks = element_blocks(x, structure, problem.params, reference, exact)
+    blocks = element_blocks(x, structure, problem.params, reference, exact, upper=layout.sparse)
     v = problem.start.shape[0]
     elements = [structure.bars, structure.hinges][: len(blocks)]
     if layout.sparse:
         proj = _vertex_projectors(v, problem.pinned, problem.projectors)
         num = layout.block_vertices.shape[0]
-        matrix, start = jnp.zeros((num, 3, 3), x.dtype), 0
+        matrix, start = jnp.zeros((2 * num, 3, 3), x.dtype), 0
         for part in blocks:  # each part on its own: a concatenation would copy them all
             part = part.reshape(-1, 3, 3)
             index = layout.blocks[start : start + part.shape[0]]
@@ -420,10 +456,11 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
         ends = layout.block_vertices.at[touched].get(mode="fill", fill_value=0)
         rows, cols = proj[ends[:, 0]], proj[ends[:, 1]]
         part = matrix.at[touched].get(mode="fill", fill_value=0.0)
+        part += jnp.swapaxes(matrix.at[touched + num].get(mode="fill", fill_value=0.0), 1, 2)
         part = jnp.sum(rows[:, :, :, None] * part[:, None], axis=2)
         part = jnp.sum(part[:, :, :, None] * cols[:, None], axis=2)
-        matrix = matrix.at[touched].set(part, mode="drop")
-        return matrix.reshape(-1)[layout.block_entries]
+        matrix = matrix.at[touched].set(part, mode="drop").at[touched + num].set(0.0, mode="drop")
+        return jnp.sum(matrix.reshape(-1)[layout.block_entries], axis=1)
     matrix = jnp.zeros((v, v, 3, 3), x.dtype)
     for part, e in zip(blocks, elements, strict=True):
         matrix = matrix.at[e[:, :, None], e[:, None, :]].add(part, mode="promise_in_bounds")
@@ -439,7 +476,7 @@ def gauged_hessian(x: Array, problem: Problem, reference: Array, exact: Array | 
     values = assemble(x, problem, reference, exact)
     eye = jnp.eye(3, dtype=x.dtype)
     return values.at[layout.diag_blocks[problem.pinned]].add(
-        _gauge_scale(problem) * (eye - problem.projectors)
+        _gauge_scale(problem) * (eye - problem.projectors), mode="drop"
     )
 
 
