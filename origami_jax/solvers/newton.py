@@ -112,6 +112,7 @@ __all__ = [
         "blocks",
         "block_vertices",
         "block_entries",
+        "block_slots",
         "vertex_blocks",
         "piece",
         "plan",
@@ -136,9 +137,10 @@ class HessianLayout:
     then hinges (H, 10) (:data:`UPPER_PAIRS`), plus B where the corners come in the other
     order (a second copy that holds transposed blocks: no transpose of the element blocks),
     ``block_vertices`` (B, 2) the row and column vertex of each, ``block_entries`` (N, 2) the
-    two entries of the flat (2B, 3, 3) blocks whose sum each CSR value takes,
+    two entries of the flat (2B, 3, 3) blocks whose sum each CSR value takes, ``block_slots``
+    (B, 9) the CSR slot of each block's entries (N below a diagonal block's diagonal),
     ``vertex_blocks`` (V, D) the stored blocks in each vertex's row or column (padded with 2B)
-    (all four empty when dense).
+    (all five empty when dense).
 
     ``piece`` (V,): the connected piece of each vertex, numbered as the gauge numbers its
     pinned triangles (by lowest vertex; -1 for a vertex on no bar).
@@ -155,6 +157,7 @@ class HessianLayout:
     blocks: Array
     block_vertices: Array
     block_entries: Array
+    block_slots: Array
     vertex_blocks: Array
     piece: Array
     plan: BlockPlan | None = None
@@ -289,6 +292,8 @@ def layout_arrays(
         indices = c.astype(np.int32)
         i, j = np.divmod(entry, 3)
         block_entries = np.stack([block * 9 + entry, (num + block) * 9 + j * 3 + i], axis=1)
+        block_slots = np.full((num, 9), len(r))
+        block_slots[block, entry] = np.arange(len(r))
         stored, wanted = r * n + c, order[diag_r] * n + order[diag_c]
         at = np.minimum(np.searchsorted(stored, wanted), len(r) - 1)
         diag_blocks = np.where(stored[at] == wanted, at, len(r)).reshape(v, 3, 3)
@@ -297,6 +302,7 @@ def layout_arrays(
     else:
         diag_blocks = (diag_r * n + diag_c).reshape(v, 3, 3)
         indptr, indices, blocks, block_entries = none, none, none, np.zeros((0, 2), np.int32)
+        block_slots = np.zeros((0, 9), np.int32)
         block_vertices, vertex_blocks = np.zeros((0, 2), np.int32), np.zeros((0, 0), np.int32)
     return HessianLayout(
         piece=_vertex_pieces(bars, v),
@@ -307,6 +313,7 @@ def layout_arrays(
         blocks=blocks.astype(np.int32),
         block_vertices=block_vertices.astype(np.int32),
         block_entries=block_entries.astype(np.int32),
+        block_slots=block_slots.astype(np.int32),
         vertex_blocks=vertex_blocks.astype(np.int32),
     )
 
@@ -385,13 +392,15 @@ def element_blocks(
             # vmapped (fold_batch), a cond on each member's flag would run both branches; on
             # whether any member wants the curvature it runs one, and the members that do not
             # get a zero weight
-            out.append(
-                jax.lax.cond(
-                    _any_member(exact),
-                    lambda: with_curvature(exact.astype(dtype)),
-                    gauss_newton,
-                )
+            # (upper: the branches give flat blocks, which the scatter then reads in place; their
+            # (H, 10, 3, 3) result was copied whole first)
+            shape = (-1, 3, 3) if upper else (-1, 4, 4, 3, 3)
+            blocks = jax.lax.cond(
+                _any_member(exact),
+                lambda: with_curvature(exact.astype(dtype)).reshape(shape),
+                lambda: gauss_newton().reshape(shape),
             )
+            out.append(blocks.reshape(-1, 10, 3, 3) if upper else blocks)
     return out
 
 
@@ -452,6 +461,7 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
             start += part.shape[0]
         # only the pinned vertices' rows and columns change (a block of two pinned vertices
         # is listed twice and set twice to the same value)
+        # set in the values, not the blocks: an update of the blocks copied all of them
         touched = layout.vertex_blocks[problem.pinned].reshape(-1)
         ends = layout.block_vertices.at[touched].get(mode="fill", fill_value=0)
         rows, cols = proj[ends[:, 0]], proj[ends[:, 1]]
@@ -459,8 +469,9 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
         part += jnp.swapaxes(matrix.at[touched + num].get(mode="fill", fill_value=0.0), 1, 2)
         part = jnp.sum(rows[:, :, :, None] * part[:, None], axis=2)
         part = jnp.sum(part[:, :, :, None] * cols[:, None], axis=2)
-        matrix = matrix.at[touched].set(part, mode="drop").at[touched + num].set(0.0, mode="drop")
-        return jnp.sum(matrix.reshape(-1)[layout.block_entries], axis=1)
+        values = jnp.sum(matrix.reshape(-1)[layout.block_entries], axis=1)
+        slots = layout.block_slots.at[touched].get(mode="fill", fill_value=values.shape[0])
+        return values.at[slots].set(part.reshape(-1, 9), mode="drop")
     matrix = jnp.zeros((v, v, 3, 3), x.dtype)
     for part, e in zip(blocks, elements, strict=True):
         matrix = matrix.at[e[:, :, None], e[:, None, :]].add(part, mode="promise_in_bounds")
