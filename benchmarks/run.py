@@ -51,7 +51,11 @@ import numpy as np  # noqa: E402
 
 from origami_jax import PatternError, fold, io, patterns  # noqa: E402
 from origami_jax.kinematics import rigid_fold  # noqa: E402
+from origami_jax.memory import keep_freed_memory  # noqa: E402
 from origami_jax.solvers import hostsparse, origami_simulator  # noqa: E402
+
+# as the README advises for large sheets: freed buffers stay in the heap (origami_jax.memory)
+KEPT_FREED_MEMORY = keep_freed_memory()
 
 THRESHOLDS = (1e-3, 1e-6, 1e-8, 1e-9)
 SOLVERS = ("newton", "lbfgs", "dynamics")
@@ -162,7 +166,8 @@ def main(argv=None) -> int:
     machine = (
         f"{platform.machine()}, {usable_cores()} cores, jax {jax.__version__}, "
         f"device {device.platform}: {device.device_kind}, "
-        f"sparse Newton solves: {hostsparse.backend()}"
+        f"sparse Newton solves: {hostsparse.backend()}, "
+        f"freed memory kept (origami_jax.memory): {KEPT_FREED_MEMORY}"
     )
     only = None if args.solvers is None else set(args.solvers.split(","))
     if args.part == "all":

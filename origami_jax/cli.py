@@ -199,6 +199,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     from origami_jax import PatternError, io
     from origami_jax.fold import fold
+    from origami_jax.memory import keep_freed_memory
+
+    keep_freed_memory()  # large sheets about a fifth faster (a process-wide malloc setting)
 
     def show_warning(message, category, *rest, **kw) -> None:  # one line, like errors
         print(f"warning: {message}", file=sys.stderr)
