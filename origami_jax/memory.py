@@ -35,7 +35,7 @@ def keep_freed_memory(threshold: int = 256 * 2**20) -> bool:
     """Let glibc's ``malloc`` serve blocks up to ``threshold`` bytes from its heap and keep up to
     twice that free at the heap's top, instead of mapping and unmapping them from the system
     (see the module docstring). Returns whether the setting took (``False`` off glibc, e.g.
-    macOS or musl). Calling it again only sets the same values."""
+    macOS or musl). Calling it again sets them again (the last call's values hold)."""
     if threshold <= 0:
         raise ValueError(f"keep_freed_memory(): threshold must be positive, got {threshold}")
     name = ctypes.util.find_library("c")

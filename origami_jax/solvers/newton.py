@@ -175,9 +175,10 @@ class HessianLayout:
         return int(self.indices.shape[0]) if self.sparse else self.size**2
 
 
-# the corner pairs (a, b), a <= b, of an element of 2 (bar) or 4 (hinge) corners: the upper
-# triangle of its symmetric Hessian, all that the sparse assembly computes
-UPPER_PAIRS = {k: [(a, b) for a in range(k) for b in range(a, k)] for k in (2, 4)}
+# the corner pairs (a, b), a <= b, of an element of 2 (bar) or 4 (hinge) corners, as the arrays
+# of their a and of their b: the upper triangle of its symmetric Hessian, all that the sparse
+# assembly computes
+UPPER_PAIRS = {k: np.triu_indices(k) for k in (2, 4)}
 
 
 def _element_pairs(elements: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -272,7 +273,7 @@ def layout_arrays(
         # the corner pairs a <= b of every element (in turn), and the stored block (the vertex
         # pair, first in the order first) each goes to, transposed when the order swaps them
         vr, vc = (
-            np.concatenate([e[:, [p[k] for p in UPPER_PAIRS[e.shape[1]]]].ravel() for e in parts])
+            np.concatenate([e[:, UPPER_PAIRS[e.shape[1]][k]].ravel() for e in parts])
             for k in (0, 1)
         )
         lo, hi = np.minimum(rank[vr], rank[vc]), np.maximum(rank[vr], rank[vc])
@@ -361,21 +362,20 @@ def element_blocks(
     a = k[:, None, None] * (outer + transverse[:, None, None] * (jnp.eye(3, dtype=dtype) - outer))
     sign = jnp.array([[1.0, -1.0], [-1.0, 1.0]], dtype)
     if upper:
-        first, second = (np.array(c) for c in zip(*UPPER_PAIRS[2], strict=True))
-        out = [sign[first, second][None, :, None, None] * a[:, None]]
+        out = [sign[UPPER_PAIRS[2]][None, :, None, None] * a[:, None]]
     else:
         out = [sign[None, :, :, None, None] * a[:, None, None]]
     if structure.hinges.shape[0]:
         goal, stiffness = hinge_goals(structure, params)
         q = x[structure.hinges]
         g = dihedral_gradients(q)
-        pairs = UPPER_PAIRS[4] if upper else None
+        pairs = list(zip(*UPPER_PAIRS[4], strict=True)) if upper else None
         pad = (slice(None),) + (None,) * (3 if upper else 4)
         kl = (stiffness * l0[structure.hinge_bars])[pad]
 
         def gauss_newton():  # in each branch: computed once, where it is used
             if upper:
-                first, second = (np.array(c) for c in zip(*pairs, strict=True))
+                first, second = UPPER_PAIRS[4]
                 return kl * (g[:, first, :, None] * g[:, second, None, :])
             return kl * (g[:, :, None, :, None] * g[:, None, :, None, :])
 
@@ -460,8 +460,8 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
             matrix = matrix.at[index].add(part, mode="promise_in_bounds")
             start += part.shape[0]
         # only the pinned vertices' rows and columns change (a block of two pinned vertices
-        # is listed twice and set twice to the same value)
-        # set in the values, not the blocks: an update of the blocks copied all of them
+        # is listed twice and set twice to the same value), set in the values (an update of
+        # the blocks copied all of them)
         touched = layout.vertex_blocks[problem.pinned].reshape(-1)
         ends = layout.block_vertices.at[touched].get(mode="fill", fill_value=0)
         rows, cols = proj[ends[:, 0]], proj[ends[:, 1]]
