@@ -374,10 +374,12 @@ def element_blocks(
         kl = (stiffness * l0[structure.hinge_bars])[pad]
 
         def gauss_newton():  # in each branch: computed once, where it is used
+            full = g[:, :, None, :, None] * g[:, None, :, None, :]
             if upper:
-                first, second = UPPER_PAIRS[4]
-                return kl * (g[:, first, :, None] * g[:, second, None, :])
-            return kl * (g[:, :, None, :, None] * g[:, None, :, None, :])
+                # all 16 outer products and then the 10: a gather of the corners first made
+                # XLA read them strided, several times slower
+                full = full[(slice(None), *UPPER_PAIRS[4])]
+            return kl * full
 
         def with_curvature(weight=1.0):
             # the angle's own Hessian is most of an iteration's work on small patterns: only
