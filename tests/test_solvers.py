@@ -153,6 +153,45 @@ def test_an_exact_hessian_that_does_not_factor_hands_over_within_the_iteration()
     assert bool(used) and not bool(ok)
 
 
+def test_exact_attempts_are_shifted_after_repeated_rejections():
+    """From the ``shift_after``-th rejected exact attempt in a row, exact attempts add a
+    Levenberg-Marquardt shift (``shift_min`` first, 10x more with each rejection, 10x less
+    with each exact step taken). At a compressed start (a Miura-ori 3 x 3 at 0.8 of its size)
+    the exact Hessian is indefinite and its dense attempt is rejected; a large shift makes it
+    factor, and the step it gives is not the convex part's."""
+    cp = patterns.miura_ori(3, 3)
+    mesh = cp.mesh
+    dense = Newton(linear_solver="dense")
+    problem = make_problem(mesh, make_structure(mesh), make_params(cp), 0.8 * mesh.vertices, 1e-9)
+    problem = prepare(dense, problem, mesh)
+    s0 = dense.init(problem)
+    step = jax.jit(lambda solver, s: solver.step(s, problem), static_argnums=0)
+
+    def attempt(s, exact):
+        solve, used = dense._factor(s, problem, exact, keep=False)
+        d, ok = solve(-s.grad)
+        return d, ok, used[0]
+
+    attempt = jax.jit(attempt)
+    n = dense.shift_after
+    unshifted = s0._replace(exact=jnp.asarray(True), failures=jnp.asarray(n - 1, jnp.int32))
+    after = step(dense, unshifted)
+    assert int(after.failures) == n and float(after.shift) == dense.shift_min
+    later = step(dataclasses.replace(dense, shift_after=n + 1), unshifted)
+    assert int(later.failures) == n and float(later.shift) == 0.0
+    _, ok, used = attempt(unshifted, jnp.asarray(True))
+    assert bool(used) and not bool(ok)
+
+    shifted = unshifted._replace(shift=jnp.asarray(10.0, s0.shift.dtype))
+    d_exact, ok, used = attempt(shifted, jnp.asarray(True))
+    d_convex, ok_convex, _ = attempt(shifted, jnp.asarray(False))
+    assert bool(ok) and bool(used) and bool(ok_convex)
+    assert np.max(np.abs(d_exact - d_convex)) > 1e-3 * np.max(np.abs(d_convex))
+    taken = step(dense, shifted)
+    assert int(taken.iteration) == 1 and float(taken.energy) < float(s0.energy)
+    assert int(taken.failures) == 0 and float(taken.shift) == pytest.approx(1.0)
+
+
 def test_the_hand_over_takes_the_same_steps_as_an_iteration_spent():
     """A sparse fold hands failed exact attempts over within the iteration; a dense one spends
     an iteration on each: the same end, in fewer iterations (Miura-ori 10 x 10; with exact

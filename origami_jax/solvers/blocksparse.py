@@ -244,7 +244,8 @@ class Factor(NamedTuple):
 def _factor_batched(
     plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array
 ) -> Factor:
-    """Factor ``H + mu diag H + floor`` over a leading batch axis of every argument but ``plan``."""
+    """Factor ``H + mu |diag H| + floor`` over a leading batch axis of every argument but
+    ``plan``."""
     # the element Hessians are computed once, not fused into (and recomputed by) the gathers
     blocks = jax.lax.optimization_barrier(blocks)
     b, dtype = proj.shape[0], proj.dtype
@@ -261,8 +262,9 @@ def _factor_batched(
     matrix = jnp.sum(rows[:, :, :, None] * matrix[:, None], axis=2)
     matrix = jnp.sum(matrix[:, :, :, None] * cols[:, None], axis=2)  # P symmetric
     diag = matrix[plan.diag] + scale * (eye - p)
-    # the Levenberg-Marquardt shift and a rounding-sized floor, as the dense solve
-    d = jnp.stack([diag[:, a, a] for a in range(3)], axis=1)  # (V, 3, b)
+    # the Levenberg-Marquardt shift and a rounding-sized floor, as the dense solve (the exact
+    # Hessian's diagonal can be negative: the shift scales with its magnitude)
+    d = jnp.abs(jnp.stack([diag[:, a, a] for a in range(3)], axis=1))  # (V, 3, b)
     floor = jnp.finfo(dtype).eps * jnp.max(d, axis=(0, 1))
     diag = diag + (mu * d + floor)[:, :, None, :] * eye
     spare = jnp.zeros((2, 3, 3, b), dtype)  # the padding blocks: zero, then written only
@@ -326,7 +328,7 @@ def _batch_first(a: Array) -> Array:
 
 @jax.custom_batching.custom_vmap
 def factor(plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array) -> Factor:
-    """Factor ``H + mu diag H + floor`` for the gauged Hessian ``H`` of one problem.
+    """Factor ``H + mu |diag H| + floor`` for the gauged Hessian ``H`` of one problem.
 
     ``blocks`` the element Hessians (bars (E, 2, 2, 3, 3), then hinges (H, 4, 4, 3, 3), as
     :func:`origami_jax.solvers.newton.element_blocks` gives them); ``proj`` (V, 3, 3) each
@@ -381,6 +383,6 @@ def _solve_factored_vmap(axis_size, in_batched, plan, factor, rhs):
 def solve(
     plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array, rhs: Array
 ) -> tuple[Array, Array]:
-    """:func:`factor` then :func:`solve_factored`: the solution (V, 3) of ``(H + mu diag H +
+    """:func:`factor` then :func:`solve_factored`: the solution (V, 3) of ``(H + mu |diag H| +
     floor) d = rhs`` and whether it is finite (the matrix was positive definite)."""
     return solve_factored(plan, factor(plan, blocks, proj, scale, mu), rhs)
