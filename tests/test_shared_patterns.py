@@ -113,7 +113,7 @@ def test_a_flat_valley_converges_on_shifted_exact_steps():
     """Origami Simulator's hinges.svg ends in a flat valley where its exact Hessian stays
     slightly indefinite: every unshifted exact attempt is rejected, and convex steps alone crept
     for 10,516 iterations and stalled at grad_norm_rel 1.3e-9. Shifted exact attempts (after
-    three rejections in a row, ``Newton.shift_after``) reach the tolerance."""
+    four rejections in a row, ``Newton.shift_after``) reach the tolerance."""
     path = SHARED / "origami-simulator" / "doc" / "hinges.svg"
     if not path.exists():
         pytest.skip(f"{path} is absent")
