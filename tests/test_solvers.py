@@ -158,7 +158,7 @@ def test_exact_attempts_are_shifted_after_repeated_rejections():
     Levenberg-Marquardt shift (``shift_min`` first, 10x more with each rejection, 10x less
     with each exact step taken). At a compressed start (a Miura-ori 3 x 3 at 0.8 of its size)
     the exact Hessian is indefinite and its dense attempt is rejected; a large shift makes it
-    factor, and the step it gives is not the convex part's."""
+    factor, and the step it gives is not the convex part's, which the shift leaves alone."""
     cp = patterns.miura_ori(3, 3)
     mesh = cp.mesh
     dense = Newton(linear_solver="dense")
@@ -187,6 +187,8 @@ def test_exact_attempts_are_shifted_after_repeated_rejections():
     d_convex, ok_convex, _ = attempt(shifted, jnp.asarray(False))
     assert bool(ok) and bool(used) and bool(ok_convex)
     assert np.max(np.abs(d_exact - d_convex)) > 1e-3 * np.max(np.abs(d_convex))
+    # the shift is the exact attempts' alone: the convex part's step is the unshifted one
+    np.testing.assert_array_equal(d_convex, attempt(unshifted, jnp.asarray(False))[0])
     taken = step(dense, shifted)
     assert int(taken.iteration) == 1 and float(taken.energy) < float(s0.energy)
     assert int(taken.failures) == 0 and float(taken.shift) == pytest.approx(1.0)

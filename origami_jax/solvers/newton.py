@@ -699,16 +699,17 @@ class Newton:
       shift_after: after this many exact attempts in a row are rejected (not positive
         definite, or no step accepted), the next ones add a Levenberg-Marquardt shift
         ``shift * |diag(H)|`` to the exact Hessian: ``shift_min`` at first, 10x more with each
-        further rejection, 10x less with each exact step taken (0 once below a thousandth of
-        ``shift_min``). A pattern whose exact Hessian stays slightly indefinite along a flat
-        valley otherwise crawls there on convex steps. Measured on 2026-12-05 (Newton,
+        further rejection (at most 1e10), 10x less with each exact step taken (0 once below a
+        thousandth of ``shift_min``). A pattern whose exact Hessian stays slightly indefinite
+        along a flat valley otherwise crawls there on convex steps. Measured on 2026-12-05 (Newton,
         float64, every shared file): Origami Simulator's hinges.svg from STALLED after 10,516
         iterations to converged after 2,766, opacityExamples.svg 140 -> 73 iterations,
         cuts.svg 194 -> 201, BoxPleatInOutWave.fold 139 -> 151, simplePatterns.svg 58 -> 59,
         the other files, the benchmark scenes, the stiffness sweep and the batch benchmark's
         sets unchanged. After 3 rejections instead: hinges.svg 3,324, BoxPleatInOutWave 148,
         cuts 187, but Miura-ori 10 x 10 at a stiffness ratio of 1e8 88 -> 98; after 2: Miura-ori
-        100 x 100 15 -> 17. A large value turns it off.
+        100 x 100 15 -> 17. ``10**9`` turns it off (it is compared with an int32 count, so
+        keep it below 2**31).
       shift_min: the first such shift, relative to the diagonal.
       max_linesearch_steps: halvings of the step before an iteration gives up.
       max_stalls: iterations in a row without a step before giving up (STALLED).
@@ -770,7 +771,8 @@ class Newton:
         )
 
     def _factor(self, s: NewtonState, problem: Problem, exact: Array, keep: bool):
-        """Factor ``H + mu |diag H|`` (exact or convex ``H``); returns ``(solve, used)``:
+        """Factor ``H + mu |diag H|`` (exact or convex ``H``; exact attempts add ``shift`` to
+        ``mu``); returns ``(solve, used)``:
         ``solve(rhs) -> (step, ok)`` for (V, 3) right-hand sides (the first call gives the Newton
         step, the second, only with ``keep``, reuses the factorization), and ``used``, a list
         that holds, once the first call has run, whether the exact Hessian was factored.
@@ -1011,7 +1013,7 @@ class Newton:
         lower = jnp.where(s.shift > 1e-3 * self.shift_min, 0.1 * s.shift, 0.0)
         shift = jnp.where(
             rejected & (failures >= self.shift_after),
-            jnp.maximum(10.0 * s.shift, self.shift_min),
+            jnp.minimum(jnp.maximum(10.0 * s.shift, self.shift_min), 1e10),  # as ``mu``
             jnp.where(take & exact_ran, lower, s.shift),
         ).astype(s.shift.dtype)
         mu = jnp.where(
