@@ -110,7 +110,9 @@ def test_an_exact_hessian_that_does_not_factor_hands_over_within_the_iteration()
     compressed, so its transverse stiffness is negative), the host factorization takes the
     convex part's step at once and says so; where the exact Hessian factors it is used.
     Vmapped (the cond runs both branches), the same per member, and no host factorization is
-    left kept. Dense, the attempt fails (``ok`` false) and costs its iteration."""
+    left kept. Dense, the attempt fails (``ok`` false) and costs its iteration. With a
+    shift on exact attempts (``Newton.shift_after``) the compressed start's exact Hessian
+    factors on the host."""
     from origami_jax.solvers import hostsparse
 
     cp = patterns.miura_ori(3, 3)
@@ -138,6 +140,11 @@ def test_an_exact_hessian_that_does_not_factor_hands_over_within_the_iteration()
             steps[name, exact] = np.asarray(step)
     np.testing.assert_array_equal(steps["shrunk", True], steps["shrunk", False])
     assert np.max(np.abs(steps["flat", True] - steps["flat", False])) > 1e-3
+    # shifted (``Newton.shift_after``), the compressed start's exact Hessian factors on the host
+    shifted = states[0]._replace(shift=jnp.asarray(10.0, states[0].shift.dtype))
+    step, ok, used, _ = one(sparse, shifted, problems[0], jnp.asarray(True))
+    assert bool(ok) and bool(used)
+    assert np.max(np.abs(np.asarray(step) - steps["shrunk", False])) > 1e-3
     both = jax.tree.map(lambda *a: jnp.stack(a), *states)
     start = jnp.stack([p.start for p in problems])
     problem = dataclasses.replace(problems[0], start=start)
