@@ -650,6 +650,12 @@ class NewtonState(NamedTuple):
     progress: Progress
 
 
+def _shift_of(s: NewtonState, exact: Array | bool) -> Array:
+    """The Levenberg-Marquardt shift of a factorization, relative to ``|diag H|``: ``mu``, plus
+    ``shift`` for the exact Hessian (see ``Newton.shift_after``)."""
+    return s.mu + jnp.where(jnp.asarray(exact), s.shift, 0.0)
+
+
 @dataclass(frozen=True)
 class Newton:
     """Newton's method with exact element Hessians (``solver="newton"``).
@@ -789,7 +795,7 @@ class Newton:
             structure, params = problem.structure, problem.params
             blocks = element_blocks(x, structure, params, s.reference, exact)
             proj = _vertex_projectors(x.shape[0], problem.pinned, problem.projectors)
-            mu = s.mu + jnp.where(exact, s.shift, 0.0)
+            mu = _shift_of(s, exact)
             factor = blocksparse.factor(layout.plan, blocks, proj, _gauge_scale(problem), mu)
             return functools.partial(blocksparse.solve_factored, layout.plan, factor), [exact]
 
@@ -798,7 +804,7 @@ class Newton:
             # the exact Hessian's diagonal can be negative: shifts scale with its magnitude
             diag = jnp.abs(values[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]])
             floor = jnp.finfo(x.dtype).eps * jnp.max(diag)
-            mu = s.mu + jnp.where(jnp.asarray(hessian_exact), s.shift, 0.0)
+            mu = _shift_of(s, hessian_exact)
             return values.at[layout.diag_blocks[:, jnp.arange(3), jnp.arange(3)]].add(
                 mu * diag + floor
             )
