@@ -57,7 +57,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from origami_jax.energy import FoldParams, Stiffness, param_arrays, structure_arrays
+from origami_jax.energy import FoldParams, Stiffness, stiffness_arrays, structure_arrays
 from origami_jax.fold import (
     HISTORY_FIELDS,
     FoldResult,
@@ -264,6 +264,7 @@ def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
     once for all the patterns of one mesh topology (on arrays this small Python's per-call
     overhead costs more than the arithmetic: 0.4 ms a problem, one by one)."""
     n = len(patterns)
+    default = stiffness_arrays(None)
     checked = [_start(k, cp, starts[k]) for k, cp in enumerate(patterns)]
     groups: dict[tuple, list[int]] = {}
     for k, cp in enumerate(patterns):
@@ -278,14 +279,25 @@ def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
         start = np.stack([checked[k] for k in ks])
         pinned, projectors = rigid_gauges(mesh.triangles, flat, start, ks)
         steps = default_max_steps(mesh.triangles, flat)
+        # param_arrays of every problem of the group at once
+        edges, driven = mesh.edges, mesh.edges_with_role("driven")
+        rest = np.linalg.norm(flat[:, edges[:, 1]] - flat[:, edges[:, 0]], axis=2)
+        target = np.stack([patterns[k].mesh.target for k in ks])[:, driven].astype(np.float64)
         for j, k in enumerate(ks):
-            shared[k] = (structure, pinned[j], projectors[j], steps[j])
+            shared[k] = (structure, pinned[j], projectors[j], steps[j], target[j], rest[j])
     members = []
     for k, cp in enumerate(patterns):
-        structure, pinned, projectors, max_step = shared[k]
+        structure, pinned, projectors, max_step, target, rest = shared[k]
+        stiffness = stiffnesses[k]
         problem = Problem(
             structure=structure,
-            params=param_arrays(cp, percents[k], stiffnesses[k]),
+            params=FoldParams(
+                target=target,
+                percent=np.asarray(percents[k], np.float64),
+                rest_length=rest,
+                # the default converted once for all
+                stiffness=default if stiffness is None else stiffness_arrays(stiffness),
+            ),
             start=checked[k],
             pinned=pinned,
             projectors=projectors,
@@ -309,16 +321,6 @@ def _topology(member: _Member) -> tuple:
     st = member.problem.structure
     arrays = (st.bars, st.hinges, st.hinge_bars, st.free, st.free_bars)
     return (member.sizes, *(np.asarray(a).tobytes() for a in arrays))
-
-
-def _shared(member: _Member, solver: Solver, layout) -> Problem:
-    """The member's problem unpadded (NumPy leaves), stiffnesses as per-element arrays (so
-    scalar and per-element ones stack), with its solver's static data (Newton: ``layout``,
-    built once for all slots)."""
-    problem, s = member.problem, member.sizes
-    stiffness = _per_element(problem.params.stiffness, s)
-    aux = layout if isinstance(solver, Newton) else _padded_aux(solver, member, problem, s)
-    return replace(problem, params=problem.params._replace(stiffness=stiffness), aux=aux)
 
 
 def _problem_axes(solver: Solver) -> Problem:
@@ -515,6 +517,50 @@ def fold_batch(
 
 def _stack(*trees):
     return jax.tree.map(lambda *a: np.stack(a), *trees)
+
+
+def _stacked_shared(members: list[_Member], solver: Solver, layout, dtype) -> Problem:
+    """The slots' problems of one topology, unpadded and stacked along the batch axis (NumPy
+    leaves, floats in ``dtype``; the leaves that :func:`_problem_axes` shares taken once):
+    stiffnesses as per-element arrays (so scalar and per-element ones stack), with the
+    solver's static data (Newton: ``layout``, built once for all slots). Stacked field by field:
+    a problem object per member cost more than the arrays it holds (about 30 us each)."""
+    problems = [m.problem for m in members]
+    sizes = members[0].sizes
+
+    def stack(get, kind=dtype):
+        return np.stack([get(p) for p in problems]).astype(kind)
+
+    def per_element(name: str, n: int) -> np.ndarray:
+        values = [getattr(p.params.stiffness, name) for p in problems]
+        if all(np.ndim(v) == 0 for v in values):  # scalars: one broadcast for all
+            return np.repeat(np.asarray(values, dtype)[:, None], n, axis=1)
+        return np.stack([np.broadcast_to(v, (n,)) for v in values]).astype(dtype)
+
+    if isinstance(solver, Newton):
+        aux = layout
+    else:
+        auxes = [_padded_aux(solver, m, m.problem, sizes) for m in members]
+        aux = None if auxes[0] is None else np.stack(auxes).astype(dtype)
+    return replace(
+        problems[0],
+        params=FoldParams(
+            target=stack(lambda p: p.params.target),
+            percent=stack(lambda p: p.params.percent),
+            rest_length=stack(lambda p: p.params.rest_length),
+            stiffness=Stiffness(
+                axial=per_element("axial", sizes.bars),
+                facet=per_element("facet", sizes.facets),
+                crease=per_element("crease", sizes.creases),
+            ),
+        ),
+        start=stack(lambda p: p.start),
+        pinned=stack(lambda p: p.pinned, np.int32),
+        projectors=stack(lambda p: p.projectors),
+        tol=stack(lambda p: p.tol),
+        max_step=stack(lambda p: p.max_step),
+        aux=aux,
+    )
 
 
 def _host_problem(problems: list[Problem], axes, dtype) -> Problem:
@@ -852,14 +898,18 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
             plan=block_plan(elements, to.vertices),
         )
 
-    def prepared(member: _Member) -> Problem:
-        return _shared(member, solver, layout) if shared else _padded(member, to, solver)
+    padded_first = None if shared else _padded(first, to, solver)
+
+    def stacked(members: list[_Member]) -> Problem:
+        """The problems of ``members`` stacked for the slots (free slots hold ``first``'s)."""
+        if shared:
+            return _stacked_shared(members, solver, layout, dtype)
+        problems = [padded_first if m is first else _padded(m, to, solver) for m in members]
+        return _host_problem(problems, axes, dtype)
 
     d = len(devices)
-    dummy = prepared(first)
-    member_bytes = sum(
-        np.asarray(a).nbytes for a in jax.tree.leaves(_map_batched(lambda a: a, axes, dummy))
-    )
+    one = _map_batched(lambda a: a[0], axes, stacked([first]))
+    member_bytes = sum(np.asarray(a).nbytes for a in jax.tree.leaves(one))
     rounds = int(np.clip(_QUEUE_BYTES // max(size * member_bytes, 1), 1, _QUEUE_PER_SLOT))
     q = size * (1 << (rounds.bit_length() - 1))  # a power of two times the slots
     qd = q // d
@@ -874,9 +924,7 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
         for j in range(len(segment)):
             member_at[(j % d) * qd + j // d] = j
         counts = np.bincount(np.arange(len(segment)) % d, minlength=d).astype(np.int32)
-        host_queue = _host_problem(
-            [dummy if j < 0 else prepared(segment[j]) for j in member_at], axes, dtype
-        )
+        host_queue = stacked([first if j < 0 else segment[j] for j in member_at])
         queue = _to_devices(host_queue, axes, devices)
         if getattr(solver, "check_start", None) is not None:  # a user's time step, say
             check_start(solver, _INITS.setdefault((solver, shared), jax.jit(init))(queue))

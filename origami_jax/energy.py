@@ -52,6 +52,7 @@ __all__ = [
     "structure_arrays",
     "make_params",
     "param_arrays",
+    "stiffness_arrays",
     "energy",
     "residuals",
     "build_energy",
@@ -141,19 +142,24 @@ def param_arrays(
 ) -> FoldParams:
     """The parameters of :func:`make_params` as float64 NumPy arrays (host side)."""
     mesh = pattern.mesh
-    if stiffness is None:
-        stiffness = Stiffness()
-    elif isinstance(stiffness, dict):
-        stiffness = Stiffness(**stiffness)
     rest = np.linalg.norm(mesh.vertices[mesh.edges[:, 1]] - mesh.vertices[mesh.edges[:, 0]], axis=1)
     return FoldParams(
         target=np.asarray(mesh.target[mesh.edges_with_role("driven")], np.float64),
         percent=np.asarray(percent, np.float64),
         rest_length=rest,
-        # a traced stiffness (inside jit or grad) stays a JAX value
-        stiffness=Stiffness(
-            *(k if isinstance(k, jax.Array) else np.asarray(k, np.float64) for k in stiffness)
-        ),
+        stiffness=stiffness_arrays(stiffness),
+    )
+
+
+def stiffness_arrays(stiffness: Stiffness | dict | None = None) -> Stiffness:
+    """A :class:`Stiffness` (default ``Stiffness()``; a dict of its fields) with float64 NumPy
+    leaves; a traced stiffness (inside jit or grad) stays a JAX value."""
+    if stiffness is None:
+        stiffness = Stiffness()
+    elif isinstance(stiffness, dict):
+        stiffness = Stiffness(**stiffness)
+    return Stiffness(
+        *(k if isinstance(k, jax.Array) else np.asarray(k, np.float64) for k in stiffness)
     )
 
 

@@ -14,7 +14,7 @@ import pytest
 from origami_jax import PatternError, fold, patterns
 from origami_jax import batch as batch_module
 from origami_jax.batch import BatchSizes, bucket, compile_count, fold_batch, problem_sizes
-from origami_jax.energy import energy
+from origami_jax.energy import Stiffness, energy, param_arrays
 from origami_jax.fold import drive, solve_fns
 from origami_jax.geometry import bar_lengths, fold_angles
 from origami_jax.solvers import Dynamics, Newton, Status
@@ -25,6 +25,7 @@ from origami_jax.solvers.base import (
     rigid_gauge,
     rigid_gauges,
 )
+from origami_jax.solvers.dynamics import lumped_mass
 
 jax.config.update("jax_enable_x64", True)
 
@@ -366,3 +367,27 @@ def test_shared_topology_stacks_scalar_and_per_element_stiffness():
         assert r.converged and single.converged
         assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
     assert results[0].energy != pytest.approx(results[1].energy, rel=1e-6)
+
+
+def test_problems_of_one_topology_stack_as_made_one_by_one():
+    # the stacked slots hold exactly each problem's own parameters, gauges and lumped masses
+    cps = [
+        patterns.miura_ori(3, 2, sector_angle=a, fold_angle=f) for a, f in ((0.9, 1.0), (1.2, 2.0))
+    ]
+    percents = [0.5, 1.0]
+    stiffness = [Stiffness(crease=0.3), {"axial": np.linspace(1.0, 2.0, cps[1].mesh.num_edges)}]
+    members = batch_module._members(cps, percents, stiffness, [None, None], 1e-9)
+    stacked = batch_module._stacked_shared(members, Dynamics(mass="area"), None, np.float64)
+    for k, cp in enumerate(cps):
+        params = param_arrays(cp, percents[k], stiffness[k])
+        np.testing.assert_array_equal(stacked.params.target[k], params.target)
+        np.testing.assert_array_equal(stacked.params.rest_length[k], params.rest_length)
+        assert stacked.params.percent[k] == params.percent
+        sizes = members[k].sizes
+        for name, n in (("axial", sizes.bars), ("crease", sizes.creases)):
+            expected = np.broadcast_to(getattr(params.stiffness, name), (n,))
+            np.testing.assert_array_equal(getattr(stacked.params.stiffness, name)[k], expected)
+        pinned, projectors = rigid_gauge(cp.mesh, cp.mesh.vertices)
+        np.testing.assert_array_equal(stacked.pinned[k], pinned)
+        np.testing.assert_array_equal(stacked.projectors[k], projectors)
+        np.testing.assert_array_equal(stacked.aux[k], lumped_mass(cp.mesh))
