@@ -80,7 +80,7 @@ from origami_jax.solvers.base import (
 )
 from origami_jax.solvers.blocksparse import block_plan
 from origami_jax.solvers.dynamics import lumped_mass
-from origami_jax.solvers.newton import layout_arrays
+from origami_jax.solvers.newton import HessianLayout, layout_arrays
 
 __all__ = [
     "fold_batch",
@@ -246,8 +246,8 @@ def _start(index: int, pattern: CreasePattern, start) -> np.ndarray:
     mesh = pattern.mesh
     if start is None and pattern.start is not None:
         start = pattern.start[mesh.source_vertex]
-    if start is None:
-        start = mesh.vertices
+    if start is None:  # flat: the mesh's vertices, checked when the pattern was made
+        return np.asarray(mesh.vertices, np.float64)
     start = np.asarray(start, np.float64)
     if start.shape != mesh.vertices.shape:
         raise PatternError(
@@ -283,11 +283,20 @@ def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
         edges, driven = mesh.edges, mesh.edges_with_role("driven")
         rest = np.linalg.norm(flat[:, edges[:, 1]] - flat[:, edges[:, 0]], axis=2)
         target = np.stack([patterns[k].mesh.target for k in ks])[:, driven].astype(np.float64)
+        sizes = BatchSizes(
+            mesh.num_vertices,
+            len(structure.bars),
+            structure.num_creases,
+            structure.num_facets,
+            len(structure.free),
+            pinned.shape[1],
+        )
         for j, k in enumerate(ks):
-            shared[k] = (structure, pinned[j], projectors[j], steps[j], target[j], rest[j])
+            shared[k] = (structure, sizes, pinned[j], projectors[j], steps[j], target[j], rest[j])
     members = []
+    tol = np.asarray(tol)
     for k, cp in enumerate(patterns):
-        structure, pinned, projectors, max_step, target, rest = shared[k]
+        structure, sizes, pinned, projectors, max_step, target, rest = shared[k]
         stiffness = stiffnesses[k]
         problem = Problem(
             structure=structure,
@@ -301,16 +310,8 @@ def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
             start=checked[k],
             pinned=pinned,
             projectors=projectors,
-            tol=np.asarray(tol),
+            tol=tol,
             max_step=np.asarray(max_step),
-        )
-        sizes = BatchSizes(
-            cp.mesh.num_vertices,
-            len(structure.bars),
-            structure.num_creases,
-            structure.num_facets,
-            len(structure.free),
-            len(pinned),
         )
         members.append(_Member(k, cp, problem, sizes))
     return members
@@ -456,7 +457,12 @@ def fold_batch(
     devices = list(devices) if devices is not None else jax.devices()
 
     members = _members(patterns, percents, stiffnesses, start_list, tol)
-    topologies = [_topology(m) for m in members]
+    # the members of a mesh topology share one structure object: its key made once
+    keys: dict[int, tuple] = {}
+    topologies = [
+        keys.get(id(m.problem.structure)) or keys.setdefault(id(m.problem.structure), _topology(m))
+        for m in members
+    ]
     count = Counter(topologies)
     # key: (sizes compiled for, topology if shared else None)
     groups: dict[tuple[BatchSizes, tuple | None], list[_Member]] = {}
@@ -873,6 +879,10 @@ def _lane_shapes(solver: Solver, problem: Problem, axes, num_edges: int):
     return _SHAPES[key]
 
 
+# the block plans of the last topologies folded with shared index arrays
+_BLOCK_LAYOUTS: dict[tuple, HessianLayout] = {}
+
+
 def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_time, finish):
     """Solve problems of one compiled shape in ``size`` slots (padded to ``to``, or with
     ``shared`` topology unpadded), handing each finished problem to ``finish([(index,
@@ -890,13 +900,20 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
     first = group[0]
     layout = None
     if shared and isinstance(solver, Newton):
-        # one topology: all slots factor their Newton systems at once (blocksparse)
-        st = first.problem.structure
-        elements = [np.asarray(st.bars)] + ([np.asarray(st.hinges)] if len(st.hinges) else [])
-        layout = replace(
-            _padded_aux(solver, first, first.problem, to),
-            plan=block_plan(elements, to.vertices),
-        )
+        # one topology: all slots factor their Newton systems at once (blocksparse); its plan
+        # kept for later calls (a design loop folds the same topology again and again)
+        key = _topology(first)
+        layout = _BLOCK_LAYOUTS.pop(key, None)
+        if layout is None:
+            st = first.problem.structure
+            elements = [np.asarray(st.bars)] + ([np.asarray(st.hinges)] if len(st.hinges) else [])
+            layout = replace(
+                _padded_aux(solver, first, first.problem, to),
+                plan=block_plan(elements, to.vertices),
+            )
+        _BLOCK_LAYOUTS[key] = layout  # the most recent last
+        while len(_BLOCK_LAYOUTS) > 16:
+            _BLOCK_LAYOUTS.pop(next(iter(_BLOCK_LAYOUTS)))
 
     padded_first = None if shared else _padded(first, to, solver)
 
