@@ -57,7 +57,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from origami_jax.energy import FoldParams, Stiffness, stiffness_arrays, structure_arrays
+from origami_jax.energy import (
+    FoldParams,
+    Stiffness,
+    rest_lengths,
+    stiffness_arrays,
+    structure_arrays,
+)
 from origami_jax.fold import (
     HISTORY_FIELDS,
     FoldResult,
@@ -151,6 +157,7 @@ class _Member(NamedTuple):
     pattern: CreasePattern
     problem: Problem  # unpadded, NumPy leaves
     sizes: BatchSizes
+    topology: tuple  # :func:`_topology`, shared by the members of one mesh topology
 
 
 def _pad_rows(a: np.ndarray, n: int, fill) -> np.ndarray:
@@ -271,7 +278,8 @@ def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
         mesh = cp.mesh
         arrays = (mesh.triangles, mesh.edges, mesh.role)
         groups.setdefault((mesh.num_vertices, *(a.tobytes() for a in arrays)), []).append(k)
-    shared: list = [None] * n
+    members: list = [None] * n
+    tol = np.asarray(tol)
     for ks in groups.values():
         mesh = patterns[ks[0]].mesh
         structure = structure_arrays(mesh)
@@ -280,8 +288,8 @@ def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
         pinned, projectors = rigid_gauges(mesh.triangles, flat, start, ks)
         steps = default_max_steps(mesh.triangles, flat)
         # param_arrays of every problem of the group at once
-        edges, driven = mesh.edges, mesh.edges_with_role("driven")
-        rest = np.linalg.norm(flat[:, edges[:, 1]] - flat[:, edges[:, 0]], axis=2)
+        rest = rest_lengths(flat, mesh.edges)
+        driven = mesh.edges_with_role("driven")
         target = np.stack([patterns[k].mesh.target for k in ks])[:, driven].astype(np.float64)
         sizes = BatchSizes(
             mesh.num_vertices,
@@ -291,37 +299,34 @@ def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
             len(structure.free),
             pinned.shape[1],
         )
+        topology = _topology(structure, sizes)
         for j, k in enumerate(ks):
-            shared[k] = (structure, sizes, pinned[j], projectors[j], steps[j], target[j], rest[j])
-    members = []
-    tol = np.asarray(tol)
-    for k, cp in enumerate(patterns):
-        structure, sizes, pinned, projectors, max_step, target, rest = shared[k]
-        stiffness = stiffnesses[k]
-        problem = Problem(
-            structure=structure,
-            params=FoldParams(
-                target=target,
-                percent=np.asarray(percents[k], np.float64),
-                rest_length=rest,
-                # the default converted once for all
-                stiffness=default if stiffness is None else stiffness_arrays(stiffness),
-            ),
-            start=checked[k],
-            pinned=pinned,
-            projectors=projectors,
-            tol=tol,
-            max_step=np.asarray(max_step),
-        )
-        members.append(_Member(k, cp, problem, sizes))
+            problem = Problem(
+                structure=structure,
+                params=FoldParams(
+                    target=target[j],
+                    percent=np.asarray(percents[k], np.float64),
+                    rest_length=rest[j],
+                    # the default converted once for all
+                    stiffness=default
+                    if stiffnesses[k] is None
+                    else stiffness_arrays(stiffnesses[k]),
+                ),
+                start=checked[k],
+                pinned=pinned[j],
+                projectors=projectors[j],
+                tol=tol,
+                max_step=np.asarray(steps[j]),
+            )
+            members[k] = _Member(k, patterns[k], problem, sizes, topology)
     return members
 
 
-def _topology(member: _Member) -> tuple:
+def _topology(structure, sizes: BatchSizes) -> tuple:
     """What a compiled solve with shared index arrays needs equal: the structure's arrays."""
-    st = member.problem.structure
+    st = structure
     arrays = (st.bars, st.hinges, st.hinge_bars, st.free, st.free_bars)
-    return (member.sizes, *(np.asarray(a).tobytes() for a in arrays))
+    return (sizes, *(np.asarray(a).tobytes() for a in arrays))
 
 
 def _problem_axes(solver: Solver) -> Problem:
@@ -457,16 +462,11 @@ def fold_batch(
     devices = list(devices) if devices is not None else jax.devices()
 
     members = _members(patterns, percents, stiffnesses, start_list, tol)
-    # the members of a mesh topology share one structure object: its key made once
-    keys: dict[int, tuple] = {}
-    topologies = [
-        keys.get(id(m.problem.structure)) or keys.setdefault(id(m.problem.structure), _topology(m))
-        for m in members
-    ]
-    count = Counter(topologies)
+    count = Counter(m.topology for m in members)
     # key: (sizes compiled for, topology if shared else None)
     groups: dict[tuple[BatchSizes, tuple | None], list[_Member]] = {}
-    for m, topology in zip(members, topologies, strict=True):
+    for m in members:
+        topology = m.topology
         shared = share_topology
         if shared is None:
             shared = count[topology] >= (2 if one_pattern else SHARED_TOPOLOGY_MIN)
@@ -902,7 +902,7 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
     if shared and isinstance(solver, Newton):
         # one topology: all slots factor their Newton systems at once (blocksparse); its plan
         # kept for later calls (a design loop folds the same topology again and again)
-        key = _topology(first)
+        key = first.topology
         layout = _BLOCK_LAYOUTS.pop(key, None)
         if layout is None:
             st = first.problem.structure

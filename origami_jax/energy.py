@@ -53,6 +53,7 @@ __all__ = [
     "make_params",
     "param_arrays",
     "stiffness_arrays",
+    "rest_lengths",
     "energy",
     "residuals",
     "build_energy",
@@ -142,13 +143,18 @@ def param_arrays(
 ) -> FoldParams:
     """The parameters of :func:`make_params` as float64 NumPy arrays (host side)."""
     mesh = pattern.mesh
-    rest = np.linalg.norm(mesh.vertices[mesh.edges[:, 1]] - mesh.vertices[mesh.edges[:, 0]], axis=1)
     return FoldParams(
         target=np.asarray(mesh.target[mesh.edges_with_role("driven")], np.float64),
         percent=np.asarray(percent, np.float64),
-        rest_length=rest,
+        rest_length=rest_lengths(mesh.vertices, mesh.edges),
         stiffness=stiffness_arrays(stiffness),
     )
+
+
+def rest_lengths(vertices: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """(..., E) lengths of the bars ``edges`` (E, 2) at ``vertices`` (..., V, 3) (host side;
+    leading axes: several sheets of one mesh topology at once)."""
+    return np.linalg.norm(vertices[..., edges[:, 1], :] - vertices[..., edges[:, 0], :], axis=-1)
 
 
 def stiffness_arrays(stiffness: Stiffness | dict | None = None) -> Stiffness:
