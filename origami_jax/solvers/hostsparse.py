@@ -71,8 +71,7 @@ def _import_cholmod():
     try:
         if coretype is not None:
             os.environ["OPENBLAS_CORETYPE"] = coretype
-        from cvxopt import cholmod
-        from cvxopt import matrix, spmatrix
+        from cvxopt import cholmod, matrix, spmatrix
 
         return cholmod, matrix, spmatrix
     except ImportError:  # pragma: no cover - depends on the environment
