@@ -36,7 +36,7 @@ from pathlib import Path
 os.environ.setdefault("JAX_ENABLE_X64", "1")
 
 import jax  # noqa: E402
-from cores import usable_cores  # noqa: E402 (benchmarks/, the script's folder)
+from cores import cpu_name, usable_cores  # noqa: E402 (benchmarks/, the script's folder)
 
 jax.config.update("jax_enable_x64", True)
 
@@ -252,7 +252,8 @@ def main(out: Path, quick: bool = False) -> None:
     out.mkdir(parents=True, exist_ok=True)
     machine = (
         f"{platform.machine()}, {usable_cores()} cores, jax {jax.__version__}, "
-        f"direct solves: {hostsparse.backend()}"
+        f"CPU {cpu_name()}, direct solves: {hostsparse.backend()} "
+        f"(its BLAS kernels: {hostsparse.cholmod_blas()})"
     )
     rows, folds = [], {}
     for n in (30,) if quick else (30, 100):

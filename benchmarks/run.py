@@ -41,7 +41,7 @@ from pathlib import Path
 os.environ.setdefault("JAX_ENABLE_X64", "1")
 
 import jax  # noqa: E402
-from cores import usable_cores  # noqa: E402 (benchmarks/, the script's folder)
+from cores import cpu_name, usable_cores  # noqa: E402 (benchmarks/, the script's folder)
 
 jax.config.update("jax_enable_x64", True)
 # one JAX device per core, as benchmarks/batch.py (fold() uses the first; fold_batch all)
@@ -166,7 +166,8 @@ def main(argv=None) -> int:
     machine = (
         f"{platform.machine()}, {usable_cores()} cores, jax {jax.__version__}, "
         f"device {device.platform}: {device.device_kind}, "
-        f"sparse Newton solves: {hostsparse.backend()}, "
+        f"CPU {cpu_name()}, sparse Newton solves: {hostsparse.backend()} "
+        f"(its BLAS kernels: {hostsparse.cholmod_blas()}), "
         f"freed memory kept (origami_jax.memory): {KEPT_FREED_MEMORY}"
     )
     only = None if args.solvers is None else set(args.solvers.split(","))

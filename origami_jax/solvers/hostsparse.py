@@ -11,7 +11,9 @@ Two backends, picked once:
   pattern and kept; each call only factors numerically. On this project's 2-core machine it
   factored the Hessian of a Miura-ori 100 x 100 (30,603 unknowns, 1.2 million stored entries)
   in 0.11 s and solved in 0.013 s, where SuperLU took 0.70 s for both (2026-12-02, best of 3,
-  the same matrix). cvxopt is GPL-3 licensed; it is optional.
+  the same matrix). cvxopt is GPL-3 licensed; it is optional. Its wheels bundle an OpenBLAS
+  too old to know recent CPUs, which then runs its slowest kernels: cvxopt is loaded here with
+  this CPU's kernels named (see :func:`openblas_coretype`).
 * **SuperLU** from scipy (a dependency of jax), in symmetric mode without pivoting, otherwise
   (a pivot that is not positive counts as a failure, as in Cholesky).
 
@@ -84,7 +86,35 @@ def _import_cholmod():
 # optional: CHOLMOD
 _cholmod, _cvx_matrix, _cvx_spmatrix = _import_cholmod()
 
-__all__ = ["backend", "factor_solve", "resolve", "solve", "superlu"]
+
+def cholmod_blas() -> str | None:
+    """The kernels that the OpenBLAS bundled with cvxopt runs (its ``openblas_get_corename``,
+    e.g. ``"SkylakeX"``), or ``None`` (no cvxopt, or a build without its own OpenBLAS)."""
+    if _cholmod is None:
+        return None
+    import ctypes
+    import glob
+
+    libs = os.path.join(os.path.dirname(_cholmod.__file__), os.pardir, "cvxopt.libs")
+    for path in sorted(glob.glob(os.path.join(libs, "libopenblas*"))):
+        try:
+            blas = ctypes.CDLL(path)
+            blas.openblas_get_corename.restype = ctypes.c_char_p
+            return blas.openblas_get_corename().decode()
+        except (OSError, AttributeError):
+            continue
+    return None
+
+
+__all__ = [
+    "backend",
+    "cholmod_blas",
+    "factor_solve",
+    "openblas_coretype",
+    "resolve",
+    "solve",
+    "superlu",
+]
 
 _KEPT_MAX = 4096  # kept factorizations never released (an interrupted solve) are dropped
 
