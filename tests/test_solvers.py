@@ -234,6 +234,34 @@ def test_cholmod_blas_runs_this_cpus_kernels():
     assert "OPENBLAS_CORETYPE" not in os.environ
 
 
+def test_cvxopt_loaded_first_on_its_slowest_kernels_is_reported():
+    """Imported after cvxopt, hostsparse cannot name the kernels; where OpenBLAS then runs its
+    slowest ones it warns, naming the variable that fixes it."""
+    import os
+    import subprocess
+    import sys
+
+    from origami_jax.solvers import hostsparse
+
+    if hostsparse.backend() != "cholmod" or hostsparse.openblas_coretype() is None:
+        pytest.skip("needs cvxopt on an x86-64 CPU with AVX2")
+    script = (
+        "import warnings, cvxopt\n"
+        "with warnings.catch_warnings(record=True) as w:\n"
+        "    warnings.simplefilter('always')\n"
+        "    from origami_jax.solvers import hostsparse\n"
+        "print(hostsparse.cholmod_blas())\n"
+        "print('|'.join(str(x.message) for x in w if x.category is RuntimeWarning))\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+    out = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, env=env, check=True
+    ).stdout.splitlines()
+    if out[0].lower() != "prescott":
+        pytest.skip(f"this CPU's kernels are recognised ({out[0]})")
+    assert "OPENBLAS_CORETYPE=" in out[1] and "slowest" in out[1]
+
+
 def test_host_sparse_backends_agree_and_fail_cleanly(monkeypatch):
     """CHOLMOD (when cvxopt is installed) and SuperLU give the same solution of a symmetric
     matrix given by its upper triangle; a matrix that is not positive definite gives ok=False

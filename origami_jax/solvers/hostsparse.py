@@ -30,6 +30,7 @@ import os
 import platform
 import sys
 import threading
+import warnings
 from collections import OrderedDict
 
 import numpy as np
@@ -105,6 +106,24 @@ def cholmod_blas() -> str | None:
             continue
     return None
 
+
+def _warn_if_slowest_kernels() -> None:
+    """cvxopt loaded before this module runs the kernels OpenBLAS detected; say so when those
+    are its slowest while this CPU has better ones."""
+    if _cholmod is None or "OPENBLAS_CORETYPE" in os.environ:
+        return
+    wanted, running = openblas_coretype(), cholmod_blas()
+    if wanted is not None and running is not None and running.lower() == "prescott":
+        warnings.warn(
+            f"cvxopt's bundled OpenBLAS runs its slowest kernels ({running}) on this CPU, which "
+            f"has {wanted}'s: sparse Newton solves (CHOLMOD) take about twice as long. Import "
+            f"origami_jax before cvxopt, or set OPENBLAS_CORETYPE={wanted} before Python starts.",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+
+
+_warn_if_slowest_kernels()
 
 __all__ = [
     "backend",
