@@ -56,7 +56,8 @@ def column(tol: float) -> str:
 
 
 def record_systems(n: int) -> tuple[list[tuple[sp.csr_matrix, np.ndarray]], object]:
-    """Fold a Miura-ori n x n with Newton and keep every host-factored system (matrix, rhs)."""
+    """Fold a Miura-ori n x n with Newton and keep every host-factored system (its upper
+    triangle, as Newton assembles it, and the rhs)."""
     systems = []
     inner = hostsparse._factor_solve  # the host call behind factor_solve (Newton's only path)
 
@@ -74,12 +75,12 @@ def record_systems(n: int) -> tuple[list[tuple[sp.csr_matrix, np.ndarray]], obje
     return systems, result
 
 
-def direct(matrix: sp.csr_matrix, rhs: np.ndarray) -> tuple[np.ndarray | None, float]:
+def direct(upper: sp.csr_matrix, rhs: np.ndarray) -> tuple[np.ndarray | None, float]:
     """Newton's own factorization and solve: (solution or None if not positive definite, s)."""
     best, x = np.inf, None
     for _ in range(3):
         t = time.perf_counter()
-        x, ok, _ = hostsparse.factor_solve(matrix.indptr, matrix.indices, matrix.data, rhs)
+        x, ok, _ = hostsparse.factor_solve(upper.indptr, upper.indices, upper.data, rhs)
         best = min(best, time.perf_counter() - t)
     return (np.asarray(x) if bool(ok) else None), best
 
@@ -129,10 +130,18 @@ def block_jacobi(matrix: sp.csr_matrix):
     return lambda r: np.einsum("vij,vj->vi", inverse, r.reshape(-1, 3)).reshape(-1)
 
 
+def symmetric(upper: sp.csr_matrix) -> sp.csr_matrix:
+    """The whole symmetric matrix of one given by its upper triangle (as Newton sends it)."""
+    return (upper + sp.triu(upper, k=1).T).tocsr()
+
+
 def measure(name: str, systems) -> list[dict]:
+    """``systems``: (upper triangle, rhs) pairs; direct solves read the triangle as Newton's do,
+    conjugate gradients multiply by the whole matrix."""
     rows, previous, release = [], None, None
-    for index, (matrix, rhs) in enumerate(systems):
-        exact_x, direct_time = direct(matrix, rhs)
+    for index, (upper, rhs) in enumerate(systems):
+        exact_x, direct_time = direct(upper, rhs)
+        matrix = symmetric(upper)
         base = {"pattern": name, "system": index, "unknowns": matrix.shape[0], "nnz": matrix.nnz}
         rows.append(
             {
@@ -163,7 +172,7 @@ def measure(name: str, systems) -> list[dict]:
                 }
             )
         if exact_x is not None:  # the next system's lagged preconditioner
-            found = hostsparse._factor(matrix.indptr, matrix.indices, matrix.data)
+            found = hostsparse._factor(upper.indptr, upper.indices, upper.data)
             if found is not None:
                 if release is not None:
                     release()
