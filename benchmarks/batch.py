@@ -30,7 +30,7 @@ from pathlib import Path
 os.environ.setdefault("JAX_ENABLE_X64", "1")
 
 import jax  # noqa: E402
-from cores import usable_cores  # noqa: E402 (benchmarks/, the script's folder)
+from cores import cpu_name, usable_cores  # noqa: E402 (benchmarks/, the script's folder)
 
 jax.config.update("jax_enable_x64", True)
 # one JAX device per core: fold_batch splits its slots across them and they run in parallel
@@ -213,10 +213,10 @@ def write(rows: list[dict], out: Path) -> None:
         writer.writerows(rows)
     device = jax.devices()[0]
     lines = [
-        f"Measured {time.strftime('%Y-%m-%d')} on {usable_cores()} cores, jax {jax.__version__},"
-        f" {device.platform}: {device.device_kind}; float64. Batch: one fold_batch call (compile"
-        " excluded); loop: fold() one by one on 64 of them, other ones for each row (compiled"
-        " beforehand).",
+        f"Measured {time.strftime('%Y-%m-%d')} on {usable_cores()} cores ({cpu_name()}), jax"
+        f" {jax.__version__}, {device.platform}: {device.device_kind}; float64. Batch: one"
+        " fold_batch call (compile excluded); loop: fold() one by one on 64 of them, other ones"
+        " for each row (compiled beforehand).",
         "",
         "| set | solver | problems | layout | devices | vertices solved | converged |"
         " mean iterations | compile (s) | batch (s) | batch folds/s | loop folds/s |"
