@@ -47,7 +47,7 @@ def openblas_coretype() -> str | None:
     on 2026-12-05 (an Intel Xeon of family 6, model 207, with AVX-512) that BLAS ran a
     1,000 x 1,000 dgemm at 18 GFlop/s (69 with the SkylakeX kernels) and CHOLMOD took
     182-191 ms to factor and solve the Hessian of a Miura-ori 100 x 100, 100-121 ms with the
-    SkylakeX or Haswell kernels; a fold of that sheet took 4.0-4.4 s, 2.4-2.5 s."""
+    SkylakeX or Haswell kernels; a fold of that sheet took 4.0-4.4 s, then 2.4-2.9 s."""
     if platform.machine().lower() not in ("x86_64", "amd64"):
         return None
     try:  # numpy's table of the CPU's features (numpy 2; numpy 1 named its module core)
