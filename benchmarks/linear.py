@@ -130,18 +130,13 @@ def block_jacobi(matrix: sp.csr_matrix):
     return lambda r: np.einsum("vij,vj->vi", inverse, r.reshape(-1, 3)).reshape(-1)
 
 
-def symmetric(upper: sp.csr_matrix) -> sp.csr_matrix:
-    """The whole symmetric matrix of one given by its upper triangle (as Newton sends it)."""
-    return (upper + sp.triu(upper, k=1).T).tocsr()
-
-
 def measure(name: str, systems) -> list[dict]:
     """``systems``: (upper triangle, rhs) pairs; direct solves read the triangle as Newton's do,
     conjugate gradients multiply by the whole matrix."""
     rows, previous, release = [], None, None
     for index, (upper, rhs) in enumerate(systems):
         exact_x, direct_time = direct(upper, rhs)
-        matrix = symmetric(upper)
+        matrix = hostsparse.symmetric_matrix(upper.indptr, upper.indices, upper.data)
         base = {"pattern": name, "system": index, "unknowns": matrix.shape[0], "nnz": matrix.nnz}
         rows.append(
             {

@@ -6,6 +6,9 @@ Patterns are few and small so that each solver compiles once per shape.
 
 import dataclasses
 import functools
+import os
+import subprocess
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -38,6 +41,14 @@ def lbfgs_seed():
     ],
     ids=lambda cp: cp.name,
 )
+def _run_python(code: str, without: str) -> subprocess.CompletedProcess:
+    """``python -c code`` in a fresh process whose environment lacks the variable ``without``."""
+    env = {k: v for k, v in os.environ.items() if k != without}
+    return subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
+    )
+
+
 def test_exact_rigid_shape(solver, cp):
     result = fold(cp, solver=solver, reference_positions=rigid_fold(cp))
     assert result.converged, result.reason
@@ -218,7 +229,6 @@ def test_cholmod_blas_runs_this_cpus_kernels():
     """cvxopt's bundled OpenBLAS (0.3.15) takes its slowest kernels on CPUs newer than itself;
     loaded through hostsparse it runs those that :func:`openblas_coretype` names for this CPU,
     and the variable that told it so is gone again."""
-    import os
 
     from origami_jax.solvers import hostsparse
 
@@ -237,9 +247,6 @@ def test_cholmod_blas_runs_this_cpus_kernels():
 def test_cvxopt_loaded_first_on_its_slowest_kernels_is_reported():
     """Imported after cvxopt, hostsparse cannot name the kernels; where OpenBLAS then runs its
     slowest ones it warns, naming the variable that fixes it."""
-    import os
-    import subprocess
-    import sys
 
     from origami_jax.solvers import hostsparse
 
@@ -253,10 +260,9 @@ def test_cvxopt_loaded_first_on_its_slowest_kernels_is_reported():
         "print(hostsparse.cholmod_blas())\n"
         "print('|'.join(str(x.message) for x in w if x.category is RuntimeWarning))\n"
     )
-    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
-    out = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, env=env, check=True
-    ).stdout.splitlines()
+    run = _run_python(script, without="OPENBLAS_CORETYPE")
+    assert run.returncode == 0, run.stderr[-3000:]
+    out = run.stdout.splitlines()
     if out[0].lower() != "prescott":
         pytest.skip(f"this CPU's kernels are recognised ({out[0]})")
     assert "OPENBLAS_CORETYPE=" in out[1] and "slowest" in out[1]
@@ -651,9 +657,6 @@ def test_reframe_and_rigid_free_piece_by_piece():
 def test_sparse_newton_in_float32_without_x64():
     """JAX's default (no x64): the sparse host solve's callback returns no 64-bit value (its
     factorization token was int64, which failed every sparse float32 solve before stop 20)."""
-    import os
-    import subprocess
-    import sys
 
     code = (
         "import jax, jax.numpy as jnp\n"
@@ -666,9 +669,6 @@ def test_sparse_newton_in_float32_without_x64():
         "assert r.fold_angle_error_max < 1e-4, r.fold_angle_error_max\n"
         "print('ok', r.iterations)\n"
     )
-    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
-    )
+    out = _run_python(code, without="JAX_ENABLE_X64")
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.startswith("ok")

@@ -133,6 +133,7 @@ __all__ = [
     "resolve",
     "solve",
     "superlu",
+    "symmetric_matrix",
 ]
 
 _KEPT_MAX = 4096  # kept factorizations never released (an interrupted solve) are dropped
@@ -232,14 +233,19 @@ def _factor(indptr, indices, data):
     return found[0].solve, lambda: None
 
 
+def symmetric_matrix(indptr, indices, data) -> sp.csr_matrix:
+    """The whole symmetric matrix given by the CSR arrays of its upper triangle."""
+    n = len(indptr) - 1
+    upper = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    return (upper + sp.triu(upper, k=1).T).tocsr()
+
+
 def superlu(indptr, indices, data) -> tuple[spla.SuperLU, np.ndarray] | None:
     """SuperLU of the symmetric matrix (given by its upper triangle) in its given order, without
     pivoting, and its pivots (``U``'s diagonal, which is ``D`` of ``L D L^T``); ``None`` if it
     does not factor."""
-    n = indptr.shape[0] - 1
     try:
-        upper = sp.csr_matrix((data, indices, indptr), shape=(n, n))
-        matrix = (upper + sp.triu(upper, k=1).T).tocsc()
+        matrix = symmetric_matrix(indptr, indices, data).tocsc()
         lu = spla.splu(
             matrix, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
         )
