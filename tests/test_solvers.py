@@ -25,6 +25,14 @@ from origami_jax.solvers.base import make_problem, positions, prepare
 SOLVER_NAMES = sorted(SOLVERS)
 
 
+def _run_python(code: str, without: str) -> subprocess.CompletedProcess:
+    """``python -c code`` in a fresh process whose environment lacks the variable ``without``."""
+    env = {k: v for k, v in os.environ.items() if k != without}
+    return subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
+    )
+
+
 @pytest.fixture(scope="module")
 def lbfgs_seed():
     return fold(patterns.seed_waterbomb(), stiffness=patterns.SEED_WATERBOMB_STIFFNESS)
@@ -41,14 +49,6 @@ def lbfgs_seed():
     ],
     ids=lambda cp: cp.name,
 )
-def _run_python(code: str, without: str) -> subprocess.CompletedProcess:
-    """``python -c code`` in a fresh process whose environment lacks the variable ``without``."""
-    env = {k: v for k, v in os.environ.items() if k != without}
-    return subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
-    )
-
-
 def test_exact_rigid_shape(solver, cp):
     result = fold(cp, solver=solver, reference_positions=rigid_fold(cp))
     assert result.converged, result.reason
