@@ -9,8 +9,9 @@ Newton's host path factors while folding Miura-ori 30 x 30 and 100 x 100 (each i
 matrix, including exact Hessians that turn out not positive definite, with the Newton step's
 right-hand side) and solves each again three ways:
 
-* ``direct``: what Newton does (:func:`origami_jax.solvers.hostsparse.factor_solve`: CHOLMOD
-  when cvxopt is installed, else SuperLU), best of 3, factorization and solve;
+* ``direct_<backend>``: what Newton does (:func:`origami_jax.solvers.hostsparse.factor_solve`),
+  best of 3, factorization and solve, by every installed backend (PARDISO, CHOLMOD, SuperLU;
+  the first is the one Newton uses, and the reference for the others' errors);
 * ``pcg_lagged``: conjugate gradients preconditioned by the previous system's factorization
   (the cheapest preconditioner that knows the sheet's stiff and soft directions: one
   triangular solve pair per iteration, no factorization);
@@ -48,6 +49,7 @@ from origami_jax.solvers import hostsparse  # noqa: E402
 
 MAX_ITER = {"pcg_lagged": 300, "pcg_block_jacobi": 3000}
 TOLS = (1e-3, 1e-8)
+DIRECT = tuple(f"direct_{backend}" for backend in ("pardiso", "cholmod", "superlu"))
 
 
 def column(tol: float) -> str:
@@ -75,13 +77,15 @@ def record_systems(n: int) -> tuple[list[tuple[sp.csr_matrix, np.ndarray]], obje
     return systems, result
 
 
-def direct(upper: sp.csr_matrix, rhs: np.ndarray) -> tuple[np.ndarray | None, float]:
-    """Newton's own factorization and solve: (solution or None if not positive definite, s)."""
+def direct(upper: sp.csr_matrix, rhs: np.ndarray, backend: str) -> tuple[np.ndarray | None, float]:
+    """Newton's factorization and solve by ``backend``: (solution or None if not positive
+    definite, s)."""
     best, x = np.inf, None
-    for _ in range(3):
-        t = time.perf_counter()
-        x, ok, _ = hostsparse.factor_solve(upper.indptr, upper.indices, upper.data, rhs)
-        best = min(best, time.perf_counter() - t)
+    with hostsparse.using(backend):
+        for _ in range(3):
+            t = time.perf_counter()
+            x, ok, _ = hostsparse.factor_solve(upper.indptr, upper.indices, upper.data, rhs)
+            best = min(best, time.perf_counter() - t)
     return (np.asarray(x) if bool(ok) else None), best
 
 
@@ -135,19 +139,25 @@ def measure(name: str, systems) -> list[dict]:
     conjugate gradients multiply by the whole matrix."""
     rows, previous, release = [], None, None
     for index, (upper, rhs) in enumerate(systems):
-        exact_x, direct_time = direct(upper, rhs)
         matrix = hostsparse.symmetric_matrix(upper.indptr, upper.indices, upper.data)
         base = {"pattern": name, "system": index, "unknowns": matrix.shape[0], "nnz": matrix.nnz}
-        rows.append(
-            {
-                **base,
-                "method": "direct",
-                "status": "factored" if exact_x is not None else "not_positive_definite",
-                **{column(tol): "" for tol in TOLS},
-                "time_s": direct_time,
-                "error_vs_direct": 0.0 if exact_x is not None else "",
-            }
-        )
+        exact_x = None
+        for backend in hostsparse.available():
+            x, direct_time = direct(upper, rhs, backend)
+            exact_x = x if backend == hostsparse.backend() else exact_x
+            error = ""
+            if x is not None and exact_x is not None:
+                error = float(np.linalg.norm(x - exact_x) / np.linalg.norm(exact_x))
+            rows.append(
+                {
+                    **base,
+                    "method": f"direct_{backend}",
+                    "status": "factored" if x is not None else "not_positive_definite",
+                    **{column(tol): "" for tol in TOLS},
+                    "time_s": direct_time,
+                    "error_vs_direct": error,
+                }
+            )
         methods = {"pcg_block_jacobi": block_jacobi(matrix)}
         if previous is not None:
             methods["pcg_lagged"] = previous
@@ -174,7 +184,11 @@ def measure(name: str, systems) -> list[dict]:
                 previous, release = found
         print(
             f"{name} system {index}: "
-            + ", ".join(f"{r['method']} {r['status']} {r['time_s']:.3f} s" for r in rows[-3:]),
+            + ", ".join(
+                f"{r['method']} {r['status']} {r['time_s']:.3f} s"
+                for r in rows
+                if r["pattern"] == name and r["system"] == index
+            ),
             flush=True,
         )
     return rows
@@ -196,14 +210,14 @@ def markdown(rows: list[dict], machine: str, folds: dict) -> str:
     ]
     for name in dict.fromkeys(r["pattern"] for r in rows):
         mine = [r for r in rows if r["pattern"] == name]
-        systems = [r for r in mine if r["method"] == "direct"]
+        systems = [r for r in mine if r["method"] == f"direct_{hostsparse.backend()}"]
         failed = sum(r["status"] != "factored" for r in systems)
-        for method in ("direct", "pcg_lagged", "pcg_block_jacobi"):
+        for method in (*DIRECT, "pcg_lagged", "pcg_block_jacobi"):
             runs = [r for r in mine if r["method"] == method]
             if not runs:
                 continue
             times = [r["time_s"] for r in runs]
-            if method == "direct":
+            if method in DIRECT:
                 reach = iters = "(exact)"
                 reach8 = f"{len(runs) - failed} of {len(runs)} factored"
             else:
@@ -233,8 +247,11 @@ def plot(rows: list[dict], out: Path) -> None:
     names = list(dict.fromkeys(r["pattern"] for r in rows))
     fig, axes = plt.subplots(1, len(names), figsize=(6 * len(names), 4.8), squeeze=False)
     for ax, name in zip(axes[0], names, strict=True):
-        for method, marker in (("direct", "o"), ("pcg_lagged", "s"), ("pcg_block_jacobi", "^")):
+        markers = {**dict(zip(DIRECT, "oDv", strict=True)), "pcg_lagged": "s"}
+        for method, marker in {**markers, "pcg_block_jacobi": "^"}.items():
             runs = [r for r in rows if r["pattern"] == name and r["method"] == method]
+            if not runs:
+                continue
             ok = [r for r in runs if r["status"] in ("factored", "converged")]
             ax.semilogy([r["system"] for r in ok], [r["time_s"] for r in ok], marker, label=method)
             bad = [r for r in runs if r not in ok]
@@ -256,8 +273,7 @@ def main(out: Path, quick: bool = False) -> None:
     out.mkdir(parents=True, exist_ok=True)
     machine = (
         f"{platform.machine()}, {usable_cores()} cores, jax {jax.__version__}, "
-        f"CPU {cpu_name()}, direct solves: {hostsparse.backend()} "
-        f"(its BLAS kernels: {hostsparse.cholmod_blas()})"
+        f"CPU {cpu_name()}, Newton's direct solves: {hostsparse.backend_details()}"
     )
     rows, folds = [], {}
     for n in (30,) if quick else (30, 100):

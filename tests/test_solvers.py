@@ -99,20 +99,30 @@ def test_newton_is_quadratic_near_the_solution():
     assert len(g) - below[0] <= 4
 
 
-def test_newton_sparse_and_dense_agree(monkeypatch):
+_BACKENDS = ("pardiso", "cholmod", "superlu")
+
+
+def _use_backend(name: str):
+    """``hostsparse.using(name)``; the test skips where ``name`` is not installed."""
+    from origami_jax.solvers import hostsparse
+
+    if name not in hostsparse.available():
+        pytest.skip(f"{name} is not installed")
+    return hostsparse.using(name)
+
+
+@pytest.mark.parametrize("backend", _BACKENDS)
+def test_newton_sparse_and_dense_agree(backend):
     from origami_jax.solvers import hostsparse
 
     cp = patterns.miura_ori(3, 3, sector_angle=np.radians(60), fold_angle=np.pi / 2)
     dense = fold(cp, solver=Newton(linear_solver="dense"))
-    sparse = fold(cp, solver=Newton(linear_solver="sparse"))
+    with _use_backend(backend):
+        assert hostsparse.backend() == backend
+        sparse = fold(cp, solver=Newton(linear_solver="sparse"))
     assert dense.converged and sparse.converged
     np.testing.assert_allclose(sparse.positions, dense.positions, atol=1e-9)
     # the kept host factorizations (for the acceleration's second solve) were all released
-    assert not hostsparse._KEPT
-    monkeypatch.setattr(hostsparse, "_cholmod", None)  # SuperLU, as without cvxopt
-    superlu = fold(cp, solver=Newton(linear_solver="sparse"))
-    assert superlu.converged
-    np.testing.assert_allclose(superlu.positions, dense.positions, atol=1e-9)
     assert not hostsparse._KEPT
 
 
@@ -233,7 +243,7 @@ def test_cholmod_blas_runs_this_cpus_kernels():
     from origami_jax.solvers import hostsparse
 
     wanted = hostsparse.openblas_coretype()
-    if hostsparse.backend() != "cholmod" or wanted is None:
+    if "cholmod" not in hostsparse.available() or wanted is None:
         pytest.skip("needs cvxopt on an x86-64 CPU with AVX2")
     if os.environ.get("OPENBLAS_CORETYPE"):
         pytest.skip("OPENBLAS_CORETYPE set by the user")
@@ -250,7 +260,7 @@ def test_cvxopt_loaded_first_on_its_slowest_kernels_is_reported():
 
     from origami_jax.solvers import hostsparse
 
-    if hostsparse.backend() != "cholmod" or hostsparse.openblas_coretype() is None:
+    if "cholmod" not in hostsparse.available() or hostsparse.openblas_coretype() is None:
         pytest.skip("needs cvxopt on an x86-64 CPU with AVX2")
     script = (
         "import warnings, cvxopt\n"
@@ -268,13 +278,26 @@ def test_cvxopt_loaded_first_on_its_slowest_kernels_is_reported():
     assert "OPENBLAS_CORETYPE=" in out[1] and "slowest" in out[1]
 
 
-def test_host_sparse_backends_agree_and_fail_cleanly(monkeypatch):
-    """CHOLMOD (when cvxopt is installed) and SuperLU give the same solution of a symmetric
-    matrix given by its upper triangle; a matrix that is not positive definite gives ok=False
-    and zeros; a kept factorization solves once."""
-    import scipy.sparse as sp
-
+@pytest.mark.parametrize("backend", _BACKENDS)
+def test_host_sparse_backends_agree_and_fail_cleanly(backend):
+    """PARDISO and CHOLMOD (where installed) and SuperLU solve a symmetric matrix given by its
+    upper triangle; a matrix that is not positive definite (a zero pivot left out of the
+    pattern too), or not finite, gives ok=False and zeros; kept factorizations (two at once)
+    solve once each, in any order. A backend that is not installed is refused by name."""
     from origami_jax.solvers import hostsparse
+
+    in_use = hostsparse.backend()
+    with _use_backend(backend):
+        assert hostsparse.backend() == backend
+        _host_sparse_solves(hostsparse)
+    assert not hostsparse._KEPT and hostsparse.backend() == in_use
+    with pytest.raises(ValueError, match="'umfpack' is not installed"):
+        with hostsparse.using("umfpack"):
+            pass
+
+
+def _host_sparse_solves(hostsparse) -> None:
+    import scipy.sparse as sp
 
     rng = np.random.default_rng(3)
     m = sp.random(40, 40, density=0.1, random_state=4)
@@ -289,28 +312,28 @@ def test_host_sparse_backends_agree_and_fail_cleanly(monkeypatch):
     assert ok and np.allclose(x, exact, rtol=1e-10)
     x2, ok2, token = hostsparse.factor_solve(*args, 2 * b, keep=True)
     assert ok2 and token > 0 and np.allclose(x2, 2 * exact, rtol=1e-10)
+    other = (3 * upper).tocsr()
+    x3, ok3, token3 = hostsparse.factor_solve(other.indptr, other.indices, other.data, b, keep=True)
+    assert ok3 and np.allclose(x3, exact / 3, rtol=1e-10)
     assert np.allclose(hostsparse.resolve(token, -b), -exact, rtol=1e-10)
     assert np.all(np.isnan(hostsparse.resolve(token, b)))  # released
+    assert np.allclose(hostsparse.resolve(token3, b), exact / 3, rtol=1e-10)
+    # float32 in, float32 out
+    x32, ok32 = hostsparse.solve(args[0], args[1], upper.data.astype(np.float32), b.astype("f4"))
+    assert ok32 and x32.dtype == np.float32 and np.allclose(x32, exact, rtol=1e-4)
     middle = np.median(np.linalg.eigvalsh(a.toarray()))
     indefinite = sp.triu(a - middle * sp.eye(40)).tocsr()
     indefinite.sort_indices()
-    x3, ok3, token3 = hostsparse.factor_solve(
-        indefinite.indptr.astype(np.int32),
-        indefinite.indices.astype(np.int32),
-        indefinite.data,
-        b,
-        keep=True,
+    x4, ok4, token4 = hostsparse.factor_solve(
+        indefinite.indptr, indefinite.indices, indefinite.data, b, keep=True
     )
-    assert not ok3 and token3 == 0 and np.all(x3 == 0)
+    assert not ok4 and token4 == 0 and np.all(x4 == 0)
     nan = upper.data.copy()
     nan[5] = np.nan
     assert not hostsparse.solve(args[0], args[1], nan, b)[1]
-    monkeypatch.setattr(hostsparse, "_cholmod", None)  # the SuperLU fallback
-    assert hostsparse.backend() == "superlu"
-    x4, ok4 = hostsparse.solve(*args, b)
-    assert ok4 and np.allclose(x4, exact, rtol=1e-10)
-    assert not hostsparse.solve(indefinite.indptr, indefinite.indices, indefinite.data, b)[1]
-    assert not hostsparse._KEPT
+    # a row without its diagonal entry (a zero pivot; PARDISO cannot read such a pattern)
+    holed = sp.csr_matrix(np.array([[0.0, 1.0, 0.0], [0.0, 3.0, 1.0], [0.0, 0.0, 2.0]]))
+    assert not hostsparse.solve(holed.indptr, holed.indices, holed.data, b[:3])[1]
 
 
 @pytest.mark.parametrize(

@@ -43,8 +43,8 @@ step), limited by ``max_turn`` and backtracked (Armijo) on the energy.
 
 The linear system is solved dense (Cholesky, inside ``jit``; vmap-able) for small patterns and
 sparse for large ones, on the host through ``jax.pure_callback``
-(:mod:`origami_jax.solvers.hostsparse`: CHOLMOD when cvxopt is installed, else SuperLU) in a
-fill-reducing nested-dissection order of the flat pattern. A batch of one topology
+(:mod:`origami_jax.solvers.hostsparse`: MKL's PARDISO or CHOLMOD where installed, else
+SuperLU) in a fill-reducing nested-dissection order of the flat pattern. A batch of one topology
 (``fold_batch``'s shared index arrays) factors all its members at once with the block-sparse
 Cholesky of :mod:`origami_jax.solvers.blocksparse` instead.
 
