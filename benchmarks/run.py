@@ -29,6 +29,7 @@ need matplotlib (``pip install ".[bench]"``); without it the CSV and markdown ar
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import functools
 import os
@@ -70,6 +71,8 @@ def cases(quick: bool):
     for n in (10,) if quick else (10, 30, 100):
         cp = patterns.miura_ori(n, n)
         extra = ("origami_simulator",) if n <= 30 else ()
+        # the sparse solves (n >= 30) by the other installed backends, in the same run
+        extra += tuple(f"newton_{b}" for b in hostsparse.available()[1:] if n >= 30)
         yield f"miura_{n}x{n}", cp, {}, rigid_fold(cp), SOLVERS + extra
     if quick:
         return
@@ -128,7 +131,16 @@ PARTS = {
 
 
 def solver_object(name: str):
-    return origami_simulator() if name == "origami_simulator" else name
+    if name == "origami_simulator":
+        return origami_simulator()
+    return "newton" if name.startswith("newton_") else name
+
+
+def host_backend(name: str):
+    """``hostsparse.using`` the backend that a ``newton_<backend>`` label names."""
+    if name.startswith("newton_"):
+        return hostsparse.using(name.removeprefix("newton_"))
+    return contextlib.nullcontext()
 
 
 # solves faster than this (s) are timed as the median of REPEATS runs
@@ -166,8 +178,7 @@ def main(argv=None) -> int:
     machine = (
         f"{platform.machine()}, {usable_cores()} cores, jax {jax.__version__}, "
         f"device {device.platform}: {device.device_kind}, "
-        f"CPU {cpu_name()}, sparse Newton solves: {hostsparse.backend()} "
-        f"(its BLAS kernels: {hostsparse.cholmod_blas()}), "
+        f"CPU {cpu_name()}, sparse Newton solves: {hostsparse.backend_details()}, "
         f"freed memory kept (origami_jax.memory): {KEPT_FREED_MEMORY}"
     )
     only = None if args.solvers is None else set(args.solvers.split(","))
@@ -219,60 +230,61 @@ def run_cases(case_list, args, only, max_time: float) -> tuple[list, list, dict]
         for solver in solvers:
             if only is not None and solver not in only:
                 continue
-            common = dict(solver=solver_object(solver), tol=args.tol, **kwargs)
-            first = fold(cp, max_iter=0, **common)  # compiles, runs nothing
-            run = dict(reference_positions=reference, max_time=max_time, max_iter=10**9)
-            r = fold(cp, **run, **common)
-            wall_time = r.wall_time
-            if wall_time < FAST:  # median of several runs: one is too noisy
-                wall_time = median_time(cp, dict(run, **common))
-            plain = None
-            if solver == "newton":  # resolve its few iterations: one sample each, timed apart
-                r = fold(cp, record_every=1, **run, **common)
-                if wall_time < FAST:  # the sample round trips would dominate: see below
-                    plain = functools.partial(median_time, cp, dict(run, **common))
-            row = {
-                "case": name,
-                "solver": solver,
-                "vertices": cp.mesh.num_vertices,
-                "converged": r.converged,
-                "status": r.status.name,
-                "iterations": r.iterations,
-                "compile_time_s": first.compile_time,
-                "wall_time_s": wall_time,
-                "fold_angle_error_max": r.fold_angle_error_max,
-                "strain_max": r.strain_max,
-                "energy": r.energy,
-                "grad_norm_rel": r.grad_norm_rel,
-                "shape_error": r.shape_error if r.shape_error is not None else float("nan"),
-            }
-            key = "grad_norm_rel" if reference is None else "fold_angle_error_max"
-            for t in THRESHOLDS:
-                row[f"time_to_{t:g}_s"] = first_at(r.history, key, t, "wall_time")
-                row[f"iterations_to_{t:g}"] = first_at(r.history, key, t, "iteration")
-                k = row[f"iterations_to_{t:g}"]
-                if plain is not None and np.isfinite(k):
-                    # a fast solve's per-iteration samples cost more than its iterations:
-                    # time a plain solve stopped after exactly that many iterations instead
-                    row[f"time_to_{t:g}_s"] = plain(int(k))
-            row["threshold_on"] = key
-            summary.append(row)
-            for k in range(len(r.history["wall_time"])):
-                history_rows.append(
-                    {
-                        "case": name,
-                        "solver": solver,
-                        **{f: float(r.history[f][k]) for f in r.history},
-                    }
+            with host_backend(solver):  # newton_<backend>: all its folds by that backend
+                common = dict(solver=solver_object(solver), tol=args.tol, **kwargs)
+                first = fold(cp, max_iter=0, **common)  # compiles, runs nothing
+                run = dict(reference_positions=reference, max_time=max_time, max_iter=10**9)
+                r = fold(cp, **run, **common)
+                wall_time = r.wall_time
+                if wall_time < FAST:  # median of several runs: one is too noisy
+                    wall_time = median_time(cp, dict(run, **common))
+                plain = None
+                if solver.startswith("newton"):  # resolve its few iterations: one sample each
+                    r = fold(cp, record_every=1, **run, **common)
+                    if wall_time < FAST:  # the sample round trips would dominate: see below
+                        plain = functools.partial(median_time, cp, dict(run, **common))
+                row = {
+                    "case": name,
+                    "solver": solver,
+                    "vertices": cp.mesh.num_vertices,
+                    "converged": r.converged,
+                    "status": r.status.name,
+                    "iterations": r.iterations,
+                    "compile_time_s": first.compile_time,
+                    "wall_time_s": wall_time,
+                    "fold_angle_error_max": r.fold_angle_error_max,
+                    "strain_max": r.strain_max,
+                    "energy": r.energy,
+                    "grad_norm_rel": r.grad_norm_rel,
+                    "shape_error": r.shape_error if r.shape_error is not None else float("nan"),
+                }
+                key = "grad_norm_rel" if reference is None else "fold_angle_error_max"
+                for t in THRESHOLDS:
+                    row[f"time_to_{t:g}_s"] = first_at(r.history, key, t, "wall_time")
+                    row[f"iterations_to_{t:g}"] = first_at(r.history, key, t, "iteration")
+                    k = row[f"iterations_to_{t:g}"]
+                    if plain is not None and np.isfinite(k):
+                        # a fast solve's per-iteration samples cost more than its iterations:
+                        # time a plain solve stopped after exactly that many iterations instead
+                        row[f"time_to_{t:g}_s"] = plain(int(k))
+                row["threshold_on"] = key
+                summary.append(row)
+                for k in range(len(r.history["wall_time"])):
+                    history_rows.append(
+                        {
+                            "case": name,
+                            "solver": solver,
+                            **{f: float(r.history[f][k]) for f in r.history},
+                        }
+                    )
+                plots.setdefault(name.replace(":", "_"), []).append((solver, r.history))
+                print(
+                    f"{name:16s} {solver:17s} {r.iterations:7d} it  "
+                    f"compile {first.compile_time:6.2f} s  run {r.wall_time:8.4f} s  "
+                    f"err {r.fold_angle_error_max:.2e}  "
+                    f"{'converged' if r.converged else r.reason}",
+                    flush=True,
                 )
-            plots.setdefault(name.replace(":", "_"), []).append((solver, r.history))
-            print(
-                f"{name:16s} {solver:17s} {r.iterations:7d} it  "
-                f"compile {first.compile_time:6.2f} s  run {r.wall_time:8.4f} s  "
-                f"err {r.fold_angle_error_max:.2e}  "
-                f"{'converged' if r.converged else r.reason}",
-                flush=True,
-            )
 
     return summary, history_rows, plots
 
