@@ -4,6 +4,7 @@
     python benchmarks/run.py --quick    # small cases only (a smoke run)
     python benchmarks/run.py --part stiffness   # only the stiffness sweep
     python benchmarks/run.py --part files       # every file under ../shared/patterns
+    python benchmarks/run.py --part svg         # every solver on the shared SVG files
     python benchmarks/run.py --part batch       # fold_batch against a loop (benchmarks/batch.py)
     python benchmarks/run.py --part linear      # Newton's systems: direct vs PCG (linear.py)
 
@@ -13,8 +14,9 @@ solvers Newton, L-BFGS and FIRE dynamics, plus Origami Simulator's scheme (semi-
 bar damping, its time step) on the Miura-ori up to 30 x 30 for comparison. A second part
 sweeps the axial : crease stiffness ratio from 1 to 1e8 on a 10 x 10 Miura-ori (files
 ``stiffness_*``). A third loads every SVG and FOLD file under ../shared/patterns and folds it
-with the defaults (Newton; files ``files_*``). Each solve is capped at ``--max-time`` seconds
-(120; 30 in the sweep, 60 for the files).
+with the defaults (Newton; files ``files_*``); a fourth folds every SVG file there with each
+solver, as the main part does the FOLD files (files ``svg_*``). Each solve is capped at
+``--max-time`` seconds (120; 30 in the sweep and the SVG part, 60 for the files).
 
 Compile time comes from a first call that compiles and runs no iteration; the wall time and
 the (wall time, error) series from a second call, compile excluded; a solve under a second is
@@ -92,6 +94,18 @@ def cases(quick: bool):
 RATIOS = (1.0, 1e2, 1e4, 1e6, 1e8)
 
 
+def svg_cases(quick: bool):
+    """Every SVG file under ../shared/patterns that loads (the FOLD files are main cases)."""
+    paths = sorted(SHARED.rglob("*.svg")) if SHARED.is_dir() else []
+    for path in paths[:2] if quick else paths:
+        try:
+            cp = io.load(path)
+        except PatternError as err:
+            print(f"skipped {path.relative_to(SHARED)}: {err}", file=sys.stderr)
+            continue
+        yield f"svg:{path.stem}", cp, {}, None, SOLVERS
+
+
 def stiffness_cases(quick: bool):
     """Miura-ori 10 x 10 at axial : crease stiffness ratios 1 to 1e8 (facets 20x the crease)."""
     cp = patterns.miura_ori(10, 10)
@@ -125,6 +139,7 @@ PARTS = {
     "main": (cases, "", True, 120.0),
     "stiffness": (stiffness_cases, "stiffness_", False, 30.0),
     "files": (file_cases, "files_", False, 60.0),
+    "svg": (svg_cases, "svg_", True, 30.0),
     "batch": (None, "batch_", True, None),  # benchmarks/batch.py
     "linear": (None, "linear_", True, None),  # benchmarks/linear.py
 }
