@@ -82,13 +82,20 @@ def cases(quick: bool):
     yield "kresling_6x2", cp, {}, rigid_fold(cp), SOLVERS
     cp = patterns.yoshimura(6, 4)
     yield "yoshimura_6x4", cp, {}, rigid_fold(cp), SOLVERS
-    for path in sorted(SHARED.rglob("*.fold")) if SHARED.is_dir() else ():
+    yield from shared_cases("*.fold", "shared")
+
+
+def shared_cases(glob: str, label: str, most: int | None = None):
+    """The files under ../shared/patterns matching ``glob`` that load, as ``label:stem``
+    cases with every solver (the first ``most`` only)."""
+    paths = sorted(SHARED.rglob(glob)) if SHARED.is_dir() else []
+    for path in paths[:most]:
         try:
             cp = io.load(path)
         except PatternError as err:
             print(f"skipped {path.relative_to(SHARED)}: {err}", file=sys.stderr)
             continue
-        yield f"shared:{path.stem}", cp, {}, None, SOLVERS
+        yield f"{label}:{path.stem}", cp, {}, None, SOLVERS
 
 
 RATIOS = (1.0, 1e2, 1e4, 1e6, 1e8)
@@ -96,14 +103,7 @@ RATIOS = (1.0, 1e2, 1e4, 1e6, 1e8)
 
 def svg_cases(quick: bool):
     """Every SVG file under ../shared/patterns that loads (the FOLD files are main cases)."""
-    paths = sorted(SHARED.rglob("*.svg")) if SHARED.is_dir() else []
-    for path in paths[:2] if quick else paths:
-        try:
-            cp = io.load(path)
-        except PatternError as err:
-            print(f"skipped {path.relative_to(SHARED)}: {err}", file=sys.stderr)
-            continue
-        yield f"svg:{path.stem}", cp, {}, None, SOLVERS
+    yield from shared_cases("*.svg", "svg", 2 if quick else None)
 
 
 def stiffness_cases(quick: bool):
