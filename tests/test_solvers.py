@@ -7,6 +7,7 @@ Patterns are few and small so that each solver compiles once per shape.
 import dataclasses
 import functools
 import os
+import re
 import subprocess
 import sys
 
@@ -294,9 +295,21 @@ def test_host_sparse_backends_agree_and_fail_cleanly(backend):
     with pytest.raises(ValueError, match="'umfpack' is not installed"):
         with hostsparse.using("umfpack"):
             pass
+    # a factorization kept by one backend solves after a switch to another; details name it
+    args, b, exact = _spd_system()
+    with _use_backend(backend):
+        assert hostsparse.backend_details().startswith(backend)
+        _, ok, token = hostsparse.factor_solve(*args, b, keep=True)
+    with hostsparse.using("superlu"):
+        assert np.allclose(hostsparse.resolve(token, b), exact, rtol=1e-10)
+    assert ok and not hostsparse._KEPT
+    if backend == "pardiso":
+        assert re.fullmatch(r"20\d\d(\.\d+)*", hostsparse.mkl_version())
 
 
-def _host_sparse_solves(hostsparse) -> None:
+def _spd_system():
+    """``((indptr, indices, data) of the upper triangle, b, exact solution)`` of a random
+    symmetric positive definite 40 x 40 system."""
     import scipy.sparse as sp
 
     rng = np.random.default_rng(3)
@@ -307,7 +320,16 @@ def _host_sparse_solves(hostsparse) -> None:
     assert upper.nnz < a.nnz  # the lower triangle is left out
     args = (upper.indptr.astype(np.int32), upper.indices.astype(np.int32), upper.data)
     b = rng.normal(size=40)
-    exact = np.linalg.solve(a.toarray(), b)
+    return args, b, np.linalg.solve(a.toarray(), b)
+
+
+def _host_sparse_solves(hostsparse) -> None:
+    import scipy.sparse as sp
+
+    args, b, exact = _spd_system()
+    indptr, indices, data = args
+    upper = sp.csr_matrix((data, indices, indptr), shape=(40, 40))
+    a = hostsparse.symmetric_matrix(*args)
     x, ok = hostsparse.solve(*args, b)
     assert ok and np.allclose(x, exact, rtol=1e-10)
     x2, ok2, token = hostsparse.factor_solve(*args, 2 * b, keep=True)

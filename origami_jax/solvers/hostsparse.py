@@ -9,7 +9,8 @@ Three backends, the first available picked (:func:`backend`):
 * **PARDISO** (Intel oneMKL's parallel direct solver, when MKL's runtime library
   ``libmkl_rt`` is installed: ``pip install "origami-jax[pardiso]"``, x86-64 only). It is
   called through ``ctypes`` (its 64-bit-integer entry ``pardiso_64``), given this order as the
-  user's permutation, analysed once per sparsity pattern; each call factors numerically. On
+  user's permutation. Each PARDISO handle is analysed once and then only factors numerically;
+  a pattern keeps up to two spare handles for the next calls. On
   this project's 2-core machine (2026-12-05, an Intel Xeon with AVX-512) it factored the
   Hessian of a Miura-ori 100 x 100 in 36-45 ms and solved in 3-7 ms, where CHOLMOD took
   86-100 ms and 5-11 ms (the same matrix, the same process). MKL is free to use and
@@ -34,6 +35,7 @@ and a zero solution (as one that is not positive definite); an unknown token giv
 from __future__ import annotations
 
 import contextlib
+import functools
 import itertools
 import os
 import platform
@@ -154,15 +156,10 @@ def _load_mkl():
     found = ctypes.util.find_library("mkl_rt")
     for path in [*paths, *([found] if found else [])]:
         try:
-            # Intel's OpenMP first, from beside MKL (MKL's threads then use this copy), for
-            # its threads' spin-wait (see _PardisoFactor.call)
-            omp = [os.path.join(os.path.dirname(path), name) for name in _OMP_NAMES]
-            omp = next((ctypes.CDLL(name) for name in omp if os.path.isfile(name)), None)
             lib = ctypes.CDLL(path)
             entry = lib.pardiso_64
         except (OSError, AttributeError):
             continue
-        lib.set_blocktime = getattr(omp, "kmp_set_blocktime", None)
         i64 = ctypes.POINTER(ctypes.c_int64)
         ints = np.ctypeslib.ndpointer(np.int64, flags="C")
         reals = np.ctypeslib.ndpointer(np.float64, flags="C")
@@ -174,9 +171,27 @@ def _load_mkl():
     return None
 
 
-_OMP_NAMES = ("libiomp5.so", "libiomp5.dylib", "libiomp5md.dll")
 # optional: PARDISO
 _mkl = _load_mkl()
+
+
+@functools.cache
+def _blocktime_setter(lib):
+    """``kmp_set_blocktime`` of the OpenMP runtime that MKL's threads run on, or ``None``:
+    looked up among the libraries already loaded (MKL loads its own when its threads first
+    start), so that no second copy of the runtime is ever loaded."""
+    import ctypes
+
+    lib.mkl_get_max_threads()  # starts MKL's threading layer and its OpenMP runtime
+    mode = getattr(os, "RTLD_NOLOAD", None)
+    if mode is None:  # pragma: no cover - not on Linux or macOS
+        return None
+    for name in ("libiomp5.so", "libiomp5.dylib"):
+        try:
+            return ctypes.CDLL(name, mode=mode).kmp_set_blocktime
+        except (OSError, AttributeError):
+            continue
+    return None
 
 
 def mkl_version() -> str | None:
@@ -208,6 +223,7 @@ __all__ = [
 ]
 
 _KEPT_MAX = 4096  # kept factorizations never released (an interrupted solve) are dropped
+_SPARE = 2  # released factors a pattern keeps for reuse (each holds a numeric factorization)
 
 
 def backend() -> str:
@@ -274,6 +290,11 @@ class _Pattern:
     def matches(self, indptr: np.ndarray, indices: np.ndarray) -> bool:
         return np.array_equal(indptr, self.indptr) and np.array_equal(indices, self.indices)
 
+    def release(self, factor) -> None:
+        """Back to the pool, which keeps at most ``_SPARE`` (a factor holds its memory)."""
+        if len(self.free) < _SPARE:
+            self.free.append(factor)
+
 
 class _PardisoFactor:
     """A PARDISO handle (its internal memory freed with the object) analysed for one pattern,
@@ -281,6 +302,8 @@ class _PardisoFactor:
 
     def __init__(self, pattern: _Pardiso):
         self.n, self.ia, self.ja, self.perm = pattern.n, pattern.ia, pattern.ja, pattern.perm
+        # the library it was made with: released through it even after a switch of backend
+        self.lib, self.set_blocktime = _mkl, _blocktime_setter(_mkl)
         self.handle = np.zeros(64, np.int64)  # PARDISO's internal pointers, zero before use
         self.iparm = np.zeros(64, np.int64)
         # our own settings (iparm[0]); the matrix's order as the user's permutation (iparm[4]),
@@ -303,25 +326,28 @@ class _PardisoFactor:
         def int_(v):
             return ctypes.byref(ctypes.c_int64(v))
 
-        if _mkl.set_blocktime is not None and "KMP_BLOCKTIME" not in os.environ:
+        if self.set_blocktime is not None and "KMP_BLOCKTIME" not in os.environ:
             # MKL's threads otherwise spin for 200 ms after each call, on the cores that XLA's
-            # threads compute on next (a 100 x 100 fold: 1.9-2.0 s, then 1.45-1.65 s); this
+            # threads compute on next (a 100 x 100 fold: 1.58-1.92 s, then 1.41-1.57 s); this
             # thread's teams only
-            _mkl.set_blocktime(0)
-        _mkl.pardiso_64(
+            self.set_blocktime(0)
+        self.lib.pardiso_64(
             self.handle, int_(1), int_(1), int_(2), int_(phase), int_(n), values, self.ia, self.ja,
             self.perm, int_(1), self.iparm, int_(0), b, x, ctypes.byref(error),
         )  # fmt: skip
         return x, error.value
 
     def __del__(self):
-        if self.analysed and _mkl is not None:
-            self.call(-1, np.zeros(1))
+        if self.analysed:
+            try:
+                self.call(-1, np.zeros(1))
+            except Exception:  # pragma: no cover - the interpreter shutting down
+                pass
 
 
 class _Pardiso(_Pattern):
     """One sparsity pattern for PARDISO: its arrays as ``pardiso_64`` reads them and a pool of
-    analysed handles."""
+    analysed handles (one analysis each: about 60 ms for a Miura-ori 100 x 100)."""
 
     def __init__(self, indptr: np.ndarray, indices: np.ndarray):
         super().__init__(indptr, indices)
@@ -336,7 +362,9 @@ class _Pardiso(_Pattern):
         (a row without its diagonal has a zero pivot: not positive definite anyway)."""
         n = indptr.shape[0] - 1
         starts, ends = indptr[:-1], indptr[1:]
-        if n == 0 or np.any(ends <= starts) or np.any(indices[starts] != np.arange(n)):
+        if n < 1 or indptr[0] != 0 or indptr[-1] != len(indices) or np.any(ends <= starts):
+            return False
+        if np.any(indices[starts] != np.arange(n)):
             return False
         within = np.ones(len(indices) - 1, bool)
         within[ends[:-1] - 1] = False  # from a row's last entry to the next row's first
@@ -349,11 +377,11 @@ class _Pardiso(_Pattern):
         handle = self.free.pop() if self.free else _PardisoFactor(self)
         values = np.array(data, np.float64, order="C")  # kept: the solves are given it too
         if not handle.analysed:
+            handle.analysed = True  # from here on its memory is released with it
             if handle.call(11, values)[1] != 0:
                 return None
-            handle.analysed = True
         if handle.call(22, values)[1] != 0:
-            self.free.append(handle)
+            self.release(handle)
             return None
         handle.values = values
         return handle
@@ -369,6 +397,7 @@ class _Cholmod(_Pattern):
 
     def __init__(self, indptr: np.ndarray, indices: np.ndarray):
         super().__init__(indptr, indices)
+        self.lib = _cholmod  # kept factors solve through it even after a switch of backend
         n = indptr.shape[0] - 1
         rows = np.repeat(np.arange(n), np.diff(indptr))
         # the upper triangle's CSR, row by row, is the lower triangle's CSC
@@ -382,36 +411,39 @@ class _Cholmod(_Pattern):
 
     def factor(self, data: np.ndarray):
         """A numeric factor of ``data`` (a symbolic factor from the pool), or ``None``."""
-        with _cholmod_options():
+        with _cholmod_options(self.lib):
             if self.free:
                 symbolic = self.free.pop()
             else:
-                symbolic = _cholmod.symbolic(self.matrix, p=self.identity)
+                symbolic = self.lib.symbolic(self.matrix, p=self.identity)
             self.matrix.V = _cvx_matrix(np.ascontiguousarray(data, np.float64))
             try:
-                _cholmod.numeric(self.matrix, symbolic)
+                self.lib.numeric(self.matrix, symbolic)
             except ArithmeticError:  # not positive definite
-                self.free.append(symbolic)
+                self.release(symbolic)
                 return None
         return symbolic
 
     def solve(self, numeric, rhs: np.ndarray) -> np.ndarray:
         b = _cvx_matrix(np.array(rhs, np.float64))
-        with _cholmod_options():
-            _cholmod.solve(numeric, b)
+        with _cholmod_options(self.lib):
+            self.lib.solve(numeric, b)
         return np.asarray(b).ravel()
 
 
 class _cholmod_options:
     """Supernodal factorization in the given order; cvxopt's global options restored after."""
 
+    def __init__(self, lib):
+        self.lib = lib
+
     def __enter__(self):
-        self.saved = dict(_cholmod.options)
-        _cholmod.options.update(supernodal=2, postorder=True)
+        self.saved = dict(self.lib.options)
+        self.lib.options.update(supernodal=2, postorder=True)
 
     def __exit__(self, *exc):
-        _cholmod.options.clear()
-        _cholmod.options.update(self.saved)
+        self.lib.options.clear()
+        self.lib.options.update(self.saved)
 
 
 _PATTERNS: list[_Pattern] = []  # the most recent patterns, newest last
@@ -444,7 +476,7 @@ def _factor(indptr, indices, data):
         numeric = pattern.factor(data)
         if numeric is None:
             return None
-        return (lambda b: pattern.solve(numeric, b)), (lambda: pattern.free.append(numeric))
+        return (lambda b: pattern.solve(numeric, b)), (lambda: pattern.release(numeric))
     found = superlu(indptr, indices, data)
     # without pivoting, U's diagonal is D of L D L^T: all positive iff positive definite
     if found is None or not np.all(found[1] > 0):
