@@ -12,10 +12,12 @@ is ``F(u, p) = dE/du = 0``, so
 
 one solve with the Hessian per tangent (forward mode) or per cotangent (reverse mode). ``H`` is
 assembled from the solver's exact element Hessians and Cholesky-factored once, in the forward
-pass (dense, for patterns up to the Newton solver's ``dense_max`` vertices), or solved by
-SuperLU (sparse). The factorization also tells whether the equilibrium is stable (``H``
-positive definite): when it is not, or the solve has not converged, **every derivative is NaN**
-and ``info`` says why: never a silent wrong gradient.
+pass (dense, for patterns up to the Newton solver's ``dense_max`` vertices), or, sparse,
+checked by SuperLU's pivots and solved by the host backend of
+:mod:`origami_jax.solvers.hostsparse` (PARDISO, CHOLMOD or SuperLU). The factorization also
+tells whether the equilibrium is stable (``H`` positive definite): when it is not, or the
+solve has not converged, **every derivative is NaN** and ``info`` says why: never a silent
+wrong gradient.
 
 On top of it: residual builders for design goals (:func:`target_positions`,
 :func:`target_shape`, :func:`target_height`, :func:`target_span`, :func:`target_surface`) and a
@@ -269,7 +271,7 @@ def equilibrium_fn(
     Args:
       pattern: the crease pattern; its triangulated mesh fixes the shapes.
       solver: a solver name or object (``"newton"``: its layout picks the dense Cholesky or the
-        sparse SuperLU solve of the Hessian, ``dense_max`` vertices).
+        sparse host solve of the Hessian, ``dense_max`` vertices).
       tol: ``grad_norm_rel`` at which a solve has converged (relative to the flat sheet's
         gradient, whatever the start); default 1e-10 in float64, 1e-4 in float32. Derivatives
         are about as accurate as this.
