@@ -181,16 +181,18 @@ def make_params(
 
 
 def hinge_goals(structure: Structure, params: FoldParams) -> tuple[Array, Array]:
-    """(H,) goal angle ``percent * target`` (0 for facets) and (H,) torsion stiffness."""
+    """(H,) goal angle ``percent * target`` (0 for facets) and (H,) torsion stiffness (with the
+    rest lengths' trailing batch axes, if any: see :mod:`origami_jax.geometry`)."""
     nc, nf = structure.num_creases, structure.num_facets
     s, dtype = params.stiffness, params.rest_length.dtype
+    trailing = params.rest_length.shape[1:]
     goals, stiffness = [], []
     if nc:
-        goals.append(params.percent * params.target)
-        stiffness.append(jnp.broadcast_to(s.crease, (nc,)))
+        goals.append(jnp.broadcast_to(params.percent * params.target, (nc, *trailing)))
+        stiffness.append(jnp.broadcast_to(s.crease, (nc, *trailing)))
     if nf:
-        goals.append(jnp.zeros(nf, dtype))
-        stiffness.append(jnp.broadcast_to(s.facet, (nf,)))
+        goals.append(jnp.zeros((nf, *trailing), dtype))
+        stiffness.append(jnp.broadcast_to(s.facet, (nf, *trailing)))
     return jnp.concatenate(goals), jnp.concatenate(stiffness)
 
 
@@ -216,13 +218,14 @@ def energy(
     x: Array, structure: Structure, params: FoldParams, reference: Array | None = None
 ) -> Array:
     """Total energy of positions ``x`` (V, 3); a scalar in energy units (force x length).
+    With trailing batch axes (``x`` (V, 3, B), the parameters' arrays (n, B)), one per member.
 
     ``reference`` (H,) unwraps each hinge's fold angle to the branch nearest it (see
     :func:`origami_jax.geometry.fold_angles`); it changes no gradient. ``None`` uses the half-way
     reference of :func:`initial_reference`, continuous on the whole way from flat to target.
     """
     r, w = residuals(x, structure, params, reference)
-    return 0.5 * jnp.sum(w * r * r)
+    return 0.5 * jnp.sum(w * r * r, axis=0)
 
 
 def initial_reference(x: Array, structure: Structure, params: FoldParams) -> Array:

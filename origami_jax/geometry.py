@@ -3,6 +3,11 @@
 Shapes: ``x`` is (V, 3) positions; ``bars`` (E, 2) and ``hinges`` (H, 4) are vertex indices.
 A hinge ``(i, j, k, l)`` is the edge ``i -> j`` with ``k`` the third vertex of the triangle on
 its left and ``l`` of the one on its right (in the flat, counterclockwise pattern).
+
+Every kernel also takes trailing axes after those shapes (``x`` (V, 3, B), results (E, B),
+(H, B), (H, 4, 3, B), ...), elementwise over them: the batch-innermost layout in which
+:mod:`origami_jax.batch` evaluates many problems of one topology at once (the coordinate axis
+is always axis 1, so a batch axis after it is contiguous).
 """
 
 from __future__ import annotations
@@ -26,7 +31,7 @@ __all__ = [
 ]
 
 
-def safe_norm(v: Array, axis: int = -1) -> Array:
+def safe_norm(v: Array, axis: int = 1) -> Array:
     """Euclidean norm whose gradient is 0 (not NaN) at the zero vector."""
     sq = jnp.sum(v * v, axis=axis)
     positive = sq > 0
@@ -36,14 +41,18 @@ def safe_norm(v: Array, axis: int = -1) -> Array:
 def bar_lengths(x: Array, bars: Array) -> Array:
     """(E,) current lengths of the bars."""
     p = x[bars]  # one gather: (E, 2, 3)
-    return safe_norm(p[:, 1] - p[:, 0])
+    return safe_norm(p[:, 1] - p[:, 0], axis=1)
 
 
 def _cross(a: Array, b: Array) -> Array:
     # written out: fewer XLA ops than jnp.cross, which matters for compile time
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
+    return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
+
+
+def _dot(a: Array, b: Array) -> Array:
+    return jnp.sum(a * b, axis=1)
 
 
 def wrap_angle(a: Array) -> Array:
@@ -73,7 +82,7 @@ def dihedral_angles(p: Array, reference: Array | None = None) -> Array:
     gradient of the energy compiles and runs faster. The reference has no effect on them.
     """
     if reference is None:
-        reference = jnp.zeros(p.shape[:1], p.dtype)
+        reference = jnp.zeros(p.shape[:1] + p.shape[3:], p.dtype)
     return _dihedral(p, reference)
 
 
@@ -85,8 +94,8 @@ def atan2_dihedral(p: Array, reference: Array | None = None) -> Array:
     e_hat = e / jnp.maximum(safe_norm(e), jnp.finfo(p.dtype).tiny)[:, None]
     n_left = _cross(e_hat, p[:, 2] - xi)
     n_right = _cross(p[:, 3] - xi, e_hat)
-    sin_part = jnp.sum(_cross(n_right, n_left) * e_hat, axis=-1)
-    cos_part = jnp.sum(n_left * n_right, axis=-1)
+    sin_part = _dot(_cross(n_right, n_left), e_hat)
+    cos_part = _dot(n_left, n_right)
     if reference is not None:
         c, s = jnp.cos(reference), jnp.sin(reference)
         sin_part, cos_part = sin_part * c - cos_part * s, cos_part * c + sin_part * s
@@ -141,7 +150,7 @@ class _Hinge(NamedTuple):
     @staticmethod
     def of(p: Array) -> _Hinge:
         e, a, b = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]
-        e2 = jnp.maximum(jnp.sum(e * e, axis=-1), jnp.finfo(p.dtype).tiny)
+        e2 = jnp.maximum(_dot(e, e), jnp.finfo(p.dtype).tiny)
         n_left, n_right = _cross(e, a), _cross(b, e)
         return _Hinge(
             e=e,
@@ -151,10 +160,10 @@ class _Hinge(NamedTuple):
             length=jnp.sqrt(e2),
             n_left=n_left,
             n_right=n_right,
-            nl2=jnp.sum(n_left * n_left, axis=-1),
-            nr2=jnp.sum(n_right * n_right, axis=-1),
-            t2=jnp.sum(a * e, axis=-1) / e2,
-            t3=jnp.sum(b * e, axis=-1) / e2,
+            nl2=_dot(n_left, n_left),
+            nr2=_dot(n_right, n_right),
+            t2=_dot(a, e) / e2,
+            t3=_dot(b, e) / e2,
         )
 
 
@@ -183,7 +192,7 @@ def _skew(v: Array) -> Array:
     z = jnp.zeros_like(v[:, 0])
     v0, v1, v2 = v[:, 0], v[:, 1], v[:, 2]
     rows = ([z, -v2, v1], [v2, z, -v0], [-v1, v0, z])
-    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=1)
+    return jnp.stack([jnp.stack(r, axis=1) for r in rows], axis=1)
 
 
 def dihedral_hessians(p: Array, pairs: Sequence[tuple[int, int]] | None = None) -> Array:

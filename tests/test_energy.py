@@ -237,3 +237,53 @@ def test_collapsed_wing_moves_along_the_other_wings_normal():
     for q in (p, both):
         assert np.isfinite(np.asarray(dihedral_hessians(q))).all()
     assert np.allclose(np.asarray(dihedral_hessians(p)[0, 2]), 0.0)
+
+
+def test_kernels_take_a_trailing_batch_axis():
+    """The batch-innermost layout of fold_batch: every kernel given (..., B) arrays equals it
+    vmapped over a leading batch; batch_innermost's vmap rule runs them so, falls back to a plain
+    vmap for per-member index arrays, and leaves an unbatched call alone (jacfwd)."""
+    from origami_jax.energy import FoldParams, Stiffness, residuals
+    from origami_jax.solvers.innermost import batch_innermost
+
+    cp = square()
+    structure, params = make_structure(cp.mesh), make_params(cp)
+    rng = np.random.default_rng(3)
+    x = jnp.asarray(cp.mesh.vertices) + 0.2 * jnp.asarray(rng.normal(size=(3, 7, 3)))
+    # per member: rest lengths and the facet stiffness; the rest shared
+    scale = jnp.asarray([1.0, 1.1, 0.9])
+    facet = jnp.asarray([0.01, 0.02, 0.05])
+    batched = params._replace(
+        rest_length=scale[:, None] * params.rest_length,
+        stiffness=params.stiffness._replace(facet=facet),
+    )
+    axes = FoldParams(None, None, 0, Stiffness(None, 0, None))
+    innermost = params._replace(  # the same, batch last: (E, B), (B,); shared arrays (n, 1)
+        target=params.target[:, None],
+        rest_length=batched.rest_length.T,
+        stiffness=params.stiffness._replace(facet=facet),
+    )
+    x_last = jnp.moveaxis(x, 0, -1)
+    p = x[:, structure.hinges]
+    for kernel in (dihedral_angles, dihedral_gradients, dihedral_hessians):
+        got = np.moveaxis(np.asarray(kernel(jnp.moveaxis(p, 0, -1))), -1, 0)
+        np.testing.assert_allclose(got, jax.vmap(kernel)(p), atol=1e-12)
+    per_member = jax.vmap(lambda x, prm: energy(x, structure, prm), in_axes=(0, axes))
+    expected = per_member(x, batched)
+    np.testing.assert_allclose(energy(x_last, structure, innermost), expected, rtol=1e-12)
+    r, w = residuals(x_last, structure, innermost)
+    r0, w0 = jax.vmap(lambda x, prm: residuals(x, structure, prm), in_axes=(0, axes))(x, batched)
+    np.testing.assert_allclose(r.T, r0, atol=1e-12)
+    np.testing.assert_allclose(w.T, w0, rtol=1e-12)
+
+    wrapped = batch_innermost(energy, index_args=(1,))
+    got = jax.vmap(lambda x, prm: wrapped(x, structure, prm), in_axes=(0, axes))(x, batched)
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+    stacked = jax.tree.map(lambda a: jnp.stack([a] * 3), structure)  # per-member indices
+    got = jax.vmap(wrapped, in_axes=(0, 0, axes))(x, stacked, batched)
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+    grads = jax.vmap(jax.grad(energy), in_axes=(0, None, axes))(x, structure, batched)
+    jac = jax.jacfwd(lambda y: wrapped(y, structure, params))(x[0])
+    np.testing.assert_allclose(jac, jax.grad(energy)(x[0], structure, params), rtol=1e-10)
+    jacs = jax.vmap(jax.jacfwd(lambda y, prm: wrapped(y, structure, prm)), in_axes=(0, axes))
+    np.testing.assert_allclose(jacs(x, batched), grads, rtol=1e-10)

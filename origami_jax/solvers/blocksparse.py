@@ -29,7 +29,15 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-__all__ = ["BlockPlan", "Factor", "block_plan", "factor", "solve", "solve_factored"]
+__all__ = [
+    "BlockPlan",
+    "Factor",
+    "block_plan",
+    "factor",
+    "factor_batch_last",
+    "solve",
+    "solve_factored",
+]
 
 
 @functools.partial(
@@ -233,31 +241,32 @@ def _upper_solve(f: tuple[Array, ...], y: Array) -> Array:
 
 
 class Factor(NamedTuple):
-    """A batch's block Cholesky factor, batch innermost: ``blocks`` (N + 2, 3, 3, B) the stored
-    blocks of L (with the two padding blocks), ``diag`` (V, 6, B) each step's 3 x 3 diagonal
-    factor (:func:`_chol3`)."""
+    """A batch's block Cholesky factor, batch innermost: per segment, ``columns`` (steps, n, 3,
+    3, B) each step's blocks of L below the diagonal (in the order of the plan's ``column``,
+    padding zero), so that a solve's scan reads them as its own slices instead of gathering
+    them; ``diag`` (V, 6, B) each step's 3 x 3 diagonal factor (:func:`_chol3`)."""
 
-    blocks: Array
+    columns: tuple[Array, ...]
     diag: Array
 
 
 def _factor_batched(
     plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array
 ) -> Factor:
-    """Factor ``H + mu |diag H| + floor`` over a leading batch axis of every argument but
-    ``plan``."""
+    """Factor ``H + mu |diag H| + floor`` over a trailing batch axis of every argument but
+    ``plan``: ``blocks`` (el, k, k, 3, 3, b), ``proj`` (V, 3, 3, b), ``scale`` and ``mu``
+    (b,)."""
     # the element Hessians are computed once, not fused into (and recomputed by) the gathers
     blocks = jax.lax.optimization_barrier(blocks)
-    b, dtype = proj.shape[0], proj.dtype
+    b, dtype = proj.shape[-1], proj.dtype
     num = plan.block_vertices.shape[0]
     eye = jnp.eye(3, dtype=dtype)[None, :, :, None]
-    # (b, el, k, k, 3, 3) -> vertex blocks (b, el * k * k, 3, 3) -> stored blocks (N, 3, 3, b)
-    flat = jnp.concatenate([e.reshape(b, -1, 3, 3) for e in blocks], axis=1)
-    parts = jnp.moveaxis(flat[:, plan.source], 0, -1)
-    matrix = jnp.zeros((num, 3, 3, b), dtype).at[plan.target].add(parts)
+    # (el, k, k, 3, 3, b) -> vertex blocks (el * k * k, 3, 3, b) -> stored blocks (N, 3, 3, b)
+    flat = jnp.concatenate([e.reshape(-1, 3, 3, b) for e in blocks])
+    matrix = jnp.zeros((num, 3, 3, b), dtype).at[plan.target].add(flat[plan.source])
     # gauge: P_i H_ik P_k for every block (P the identity but at pinned vertices), and a
     # stiffness-sized identity on the pinned-out directions
-    p = jnp.moveaxis(proj[:, plan.order], 0, -1)  # (V, 3, 3, b) in elimination order
+    p = proj[plan.order]  # (V, 3, 3, b) in elimination order
     rows, cols = p[plan.block_vertices[:, 0]], p[plan.block_vertices[:, 1]]
     matrix = jnp.sum(rows[:, :, :, None] * matrix[:, None], axis=2)
     matrix = jnp.sum(matrix[:, :, :, None] * cols[:, None], axis=2)  # P symmetric
@@ -274,17 +283,19 @@ def _factor_batched(
         k, column, a, c, target = step
         f = _chol3(m[k])
         x = jnp.moveaxis(_lower_solve(f, jnp.moveaxis(m[column], 2, 0)), 0, 2)  # L_ik
-        m = m.at[column].set(x)
         update = jnp.sum(x[a][:, :, None] * x[c][:, None], axis=3)  # L_ik L_jk^T
-        return m.at[target].add(-update), jnp.stack(f)
+        # column k is final: kept as the scan's output, not written back (only later columns
+        # are read from here on)
+        return m.at[target].add(-update), (jnp.stack(f), x)
 
-    factors = []
+    factors, columns = [], []
     for (first, end), *segment in zip(
         plan.segments, plan.column, plan.pair_a, plan.pair_b, plan.pair_target, strict=True
     ):
-        matrix, f = jax.lax.scan(eliminate, matrix, (plan.diag[first:end], *segment))
+        matrix, (f, x) = jax.lax.scan(eliminate, matrix, (plan.diag[first:end], *segment))
         factors.append(f)
-    return Factor(matrix, jnp.concatenate(factors))
+        columns.append(x)
+    return Factor(tuple(columns), jnp.concatenate(factors))
 
 
 def _solve_batched(plan: BlockPlan, factor: Factor, rhs: Array) -> tuple[Array, Array]:
@@ -298,16 +309,18 @@ def _solve_batched(plan: BlockPlan, factor: Factor, rhs: Array) -> tuple[Array, 
         k, f, column, below = step
         yk = _lower_solve(tuple(f), y[k])
         y = y.at[k].set(yk)
-        return y.at[below].add(-jnp.sum(factor.blocks[column] * yk[None, None], axis=2)), None
+        return y.at[below].add(-jnp.sum(column * yk[None, None], axis=2)), None
 
     def backward(x, step):
         k, f, column, below = step
-        rest = jnp.sum(factor.blocks[column] * x[below][:, :, None], axis=(0, 1))
+        rest = jnp.sum(column * x[below][:, :, None], axis=(0, 1))
         return x.at[k].set(_upper_solve(tuple(f), x[k] - rest)), None
 
     segments = [
         (ks[first:end], factor.diag[first:end], column, below)
-        for (first, end), column, below in zip(plan.segments, plan.column, plan.below, strict=True)
+        for (first, end), column, below in zip(
+            plan.segments, factor.columns, plan.below, strict=True
+        )
     ]
     for steps in segments:
         y, _ = jax.lax.scan(forward, y, steps)
@@ -337,8 +350,17 @@ def factor(plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: 
     Under ``vmap`` (with ``plan`` shared) all members factor at once. A matrix that is not
     positive definite gives NaN in the factor, and so in every :func:`solve_factored`.
     """
-    args = jax.tree.map(lambda a: jnp.asarray(a)[None], (blocks, proj, scale, mu))
+    args = jax.tree.map(lambda a: jnp.asarray(a)[..., None], (blocks, proj, scale, mu))
     return jax.tree.map(lambda a: a[..., 0], _factor_batched(plan, *args))
+
+
+def factor_batch_last(
+    plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array
+) -> Factor:
+    """:func:`factor` of a batch given with its axis last on every argument but ``plan``
+    (``blocks`` (E, 2, 2, 3, 3, B) and (H, 4, 4, 3, 3, B), ``proj`` (V, 3, 3, B), ``scale`` and
+    ``mu`` (B,)); the factor's arrays have it last too."""
+    return _factor_batched(plan, blocks, proj, scale, mu)
 
 
 @factor.def_vmap
@@ -348,7 +370,9 @@ def _factor_vmap(axis_size, in_batched, plan, blocks, proj, scale, mu):
         out = jax.vmap(factor.fun, in_axes=tuple(axes))(plan, blocks, proj, scale, mu)
         return out, jax.tree.map(lambda _: True, out)
     args = jax.tree.map(
-        lambda a, batched: a if batched else jnp.broadcast_to(a, (axis_size, *a.shape)),
+        lambda a, batched: (
+            _batch_last(a) if batched else jnp.broadcast_to(a[..., None], (*a.shape, axis_size))
+        ),
         (blocks, proj, scale, mu),
         tuple(in_batched[1:]),
     )

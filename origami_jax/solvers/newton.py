@@ -91,6 +91,7 @@ from origami_jax.solvers.base import (
     run_steps,
 )
 from origami_jax.solvers.blocksparse import BlockPlan
+from origami_jax.solvers.innermost import batch_innermost
 
 __all__ = [
     "Newton",
@@ -349,23 +350,29 @@ def element_blocks(
 
     ``exact`` selects the exact Hessian; otherwise its convex part (compressive bar term and
     the hinges' ``(rho - goal) hess(rho)`` term dropped), positive semi-definite.
+
+    With a trailing batch axis (``x`` (V, 3, B), see :mod:`origami_jax.solvers.innermost`), the
+    blocks have it last.
     """
     dtype = x.dtype
+    trailing = x.shape[2:]  # a batch innermost (batch_innermost), elementwise
+    ones = (None,) * len(trailing)
     p = x[structure.bars]
     l0 = params.rest_length
     d = p[:, 1] - p[:, 0]
-    length = jnp.sqrt(jnp.sum(d * d, axis=-1))
+    length = jnp.sqrt(jnp.sum(d * d, axis=1))
     dh = d / jnp.maximum(length, jnp.finfo(dtype).tiny)[:, None]
     transverse = 1.0 - l0 / jnp.maximum(length, jnp.finfo(dtype).tiny)
     transverse = jnp.where(exact, transverse, jnp.maximum(transverse, 0.0))
     k = params.stiffness.axial / l0
     outer = dh[:, :, None] * dh[:, None, :]
-    a = k[:, None, None] * (outer + transverse[:, None, None] * (jnp.eye(3, dtype=dtype) - outer))
+    eye = jnp.eye(3, dtype=dtype)[(..., *ones)]
+    a = k[:, None, None] * (outer + transverse[:, None, None] * (eye - outer))
     sign = jnp.array([[1.0, -1.0], [-1.0, 1.0]], dtype)
     if upper:
-        out = [sign[UPPER_PAIRS[2]][None, :, None, None] * a[:, None]]
+        out = [sign[UPPER_PAIRS[2]][(None, slice(None), None, None, *ones)] * a[:, None]]
     else:
-        out = [sign[None, :, :, None, None] * a[:, None, None]]
+        out = [sign[(None, slice(None), slice(None), None, None, *ones)] * a[:, None, None]]
     if structure.hinges.shape[0]:
         goal, stiffness = hinge_goals(structure, params)
         q = x[structure.hinges]
@@ -397,13 +404,13 @@ def element_blocks(
             # get a zero weight
             # (upper: the branches give flat blocks, which the scatter then reads in place; their
             # (H, 10, 3, 3) result was copied whole first)
-            shape = (-1, 3, 3) if upper else (-1, 4, 4, 3, 3)
+            shape = (-1, 3, 3, *trailing) if upper else (-1, 4, 4, 3, 3, *trailing)
             blocks = jax.lax.cond(
-                _any_member(exact),
+                _any_member(jnp.any(exact)),
                 lambda: with_curvature(exact.astype(dtype)).reshape(shape),
                 lambda: gauss_newton().reshape(shape),
             )
-            out.append(blocks.reshape(-1, 10, 3, 3) if upper else blocks)
+            out.append(blocks.reshape(-1, 10, 3, 3, *trailing) if upper else blocks)
     return out
 
 
@@ -504,22 +511,43 @@ def energy_noise(x: Array, problem: Problem, reference: Array, value: Array) -> 
     energy plus each element's force times its length (bars) or moment (hinges). In a strained
     equilibrium the element forces are far larger than the energy's own size suggests; below
     this level an Armijo test compares rounding errors, so it accepts any change within it."""
-    structure, params = problem.structure, problem.params
-    eps = jnp.finfo(x.dtype).eps
+    work = _element_work(x, problem.structure, problem.params, reference)
+    return 16 * jnp.finfo(x.dtype).eps * (jnp.abs(value) + work)
+
+
+def _element_work(x: Array, structure: Structure, params, reference: Array) -> Array:
+    """The sum of each element's force times its length (bars) or moment (hinges)."""
     l0 = params.rest_length
     length = bar_lengths(x, structure.bars)
-    work = jnp.sum(params.stiffness.axial / l0 * jnp.abs(length - l0) * length)
+    work = jnp.sum(params.stiffness.axial / l0 * jnp.abs(length - l0) * length, axis=0)
     if structure.hinges.shape[0]:
         goal, stiffness = hinge_goals(structure, params)
         rho = fold_angles(x, structure.hinges, reference)
-        work += jnp.sum(stiffness * l0[structure.hinge_bars] * jnp.abs(rho - goal))
-    return 16 * eps * (jnp.abs(value) + work)
+        work += jnp.sum(stiffness * l0[structure.hinge_bars] * jnp.abs(rho - goal), axis=0)
+    return work
+
+
+def _hinge_angles(x: Array, structure: Structure, reference: Array) -> Array:
+    return fold_angles(x, structure.hinges, reference)
+
+
+def _energy_and_gradient(x: Array, structure: Structure, params, reference: Array):
+    value, pullback = jax.vjp(lambda y: energy(y, structure, params, reference), x)
+    return value, pullback(jnp.ones_like(value))[0]
+
+
+# vmapped over problems of one topology (fold_batch), the element kernels of a step run with the
+# batch innermost (see innermost.py; also _second_order_pull and _block_factor below)
+_element_work = batch_innermost(_element_work, index_args=(1,))
+_hinge_angles = batch_innermost(_hinge_angles, index_args=(1,))
+_energy_and_gradient = batch_innermost(_energy_and_gradient, index_args=(1,))
+_energy = batch_innermost(energy, index_args=(1,))
 
 
 def _value_and_grad(u: Array, problem: Problem, reference: Array):
     """Energy at displacement ``u``, its gradient in the positions, and the largest entry of
     that gradient gauged (the gradient in ``u``, which the convergence test reads)."""
-    value, grad = jax.value_and_grad(energy)(
+    value, grad = _energy_and_gradient(
         positions(problem, u), problem.structure, problem.params, reference
     )
     return value, grad, jnp.max(jnp.abs(gauge(problem, grad)))
@@ -599,6 +627,49 @@ def rigid_fit(x: Array, problem: Problem):
         return w - (shift[k] + jnp.cross(omega[k], r)) * weight, spin
 
     return remove
+
+
+def _second_order_pull(
+    x: Array, velocity: Array, structure: Structure, params, reference: Array
+) -> Array:
+    """``J^T W r''[v, v]``: the residuals' second derivative along ``velocity`` at ``x``,
+    weighted and pulled back to the positions (the right-hand side of geodesic acceleration)."""
+
+    def res(y):
+        return residuals(y, structure, params, reference)
+
+    _, transpose, weights = jax.vjp(res, x, has_aux=True)  # weights: constant in x
+
+    def rate(y):
+        return jax.jvp(lambda y: res(y)[0], (y,), (velocity,))[1]
+
+    second = jax.jvp(rate, (x,), (velocity,))[1]
+    return transpose(weights * second)[0]
+
+
+_second_order_pull = batch_innermost(_second_order_pull, index_args=(2,))
+
+
+def _block_factor(
+    plan: blocksparse.BlockPlan,
+    structure: Structure,
+    x: Array,
+    params,
+    reference: Array,
+    exact: Array,
+    proj: Array,
+    scale: Array,
+    mu: Array,
+) -> blocksparse.Factor:
+    """:func:`element_blocks` factored by :func:`blocksparse.factor` (``proj``, ``scale``,
+    ``mu`` as there); vmapped, with the batch innermost from the positions to the factor."""
+    blocks = element_blocks(x, structure, params, reference, exact)
+    if x.ndim == 2:
+        return blocksparse.factor(plan, blocks, proj, scale, mu)
+    return blocksparse.factor_batch_last(plan, blocks, proj, scale, mu)
+
+
+_block_factor = batch_innermost(_block_factor, index_args=(0, 1))
 
 
 def _cholesky_solve(matrix: Array, rhs: Array) -> Array:
@@ -792,11 +863,18 @@ class Newton:
         layout: HessianLayout = problem.aux
         x = positions(problem, s.u)
         if layout.plan is not None:
-            structure, params = problem.structure, problem.params
-            blocks = element_blocks(x, structure, params, s.reference, exact)
             proj = _vertex_projectors(x.shape[0], problem.pinned, problem.projectors)
-            mu = _shift_of(s, exact)
-            factor = blocksparse.factor(layout.plan, blocks, proj, _gauge_scale(problem), mu)
+            factor = _block_factor(
+                layout.plan,
+                problem.structure,
+                x,
+                problem.params,
+                s.reference,
+                exact,
+                proj,
+                _gauge_scale(problem),
+                _shift_of(s, exact),
+            )
             return functools.partial(blocksparse.solve_factored, layout.plan, factor), [exact]
 
         def shifted(hessian_exact):
@@ -922,7 +1000,7 @@ class Newton:
             return x + t * step + (0.5 * t * t) * curve
 
         def value_at(alpha):
-            return energy(point(alpha), problem.structure, problem.params, s.reference)
+            return _energy(point(alpha), problem.structure, problem.params, s.reference)
 
         noise = energy_noise(x, problem, s.reference, s.energy)
 
@@ -964,19 +1042,8 @@ class Newton:
     def _acceleration(self, s: NewtonState, problem: Problem, x, velocity: Array, solve) -> Array:
         """``a = -H^-1 J^T W r''[v, v]`` at positions ``x`` (zero when too large or not
         finite)."""
-        structure, params = problem.structure, problem.params
-
-        def res(y):
-            return residuals(y, structure, params, s.reference)
-
-        _, transpose, weights = jax.vjp(res, x, has_aux=True)  # weights: constant in x
-
-        def rate(y):
-            return jax.jvp(lambda y: res(y)[0], (y,), (velocity,))[1]
-
-        second = jax.jvp(rate, (x,), (velocity,))[1]
-        pull = gauge(problem, transpose(weights * second)[0])
-        curve, ok = solve(-pull)
+        pull = _second_order_pull(x, velocity, problem.structure, problem.params, s.reference)
+        curve, ok = solve(-gauge(problem, pull))
         small = 2 * jnp.linalg.norm(curve) <= self.acceleration * jnp.linalg.norm(velocity)
         return jnp.where(ok & small, curve, 0.0)
 
@@ -1010,7 +1077,7 @@ class Newton:
         keep = lambda new, old: jnp.where(take, new, old)  # noqa: E731
         u = keep(u, s.u)
         reference = keep(
-            fold_angles(positions(problem, u), problem.structure.hinges, s.reference),
+            _hinge_angles(positions(problem, u), problem.structure, s.reference),
             s.reference,
         )
         # exact attempts are shifted once ``shift_after`` of them in a row have failed: 10x more
