@@ -29,12 +29,13 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from origami_jax.solvers.innermost import batch_innermost
+
 __all__ = [
     "BlockPlan",
     "Factor",
     "block_plan",
     "factor",
-    "factor_batch_last",
     "solve",
     "solve_factored",
 ]
@@ -335,50 +336,26 @@ def _batch_last(a: Array) -> Array:
     return jnp.moveaxis(a, 0, -1)
 
 
-def _batch_first(a: Array) -> Array:
-    return jnp.moveaxis(a, -1, 0)
-
-
-@jax.custom_batching.custom_vmap
-def factor(plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array) -> Factor:
+def _factor(plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array) -> Factor:
     """Factor ``H + mu |diag H| + floor`` for the gauged Hessian ``H`` of one problem.
 
     ``blocks`` the element Hessians (bars (E, 2, 2, 3, 3), then hinges (H, 4, 4, 3, 3), as
     :func:`origami_jax.solvers.newton.element_blocks` gives them); ``proj`` (V, 3, 3) each
     vertex's gauge projector (identity but at pinned vertices); ``scale`` the stiffness put on
     the pinned-out directions; ``mu`` the Levenberg-Marquardt shift relative to the diagonal.
-    Under ``vmap`` (with ``plan`` shared) all members factor at once. A matrix that is not
-    positive definite gives NaN in the factor, and so in every :func:`solve_factored`.
+    With a trailing batch axis on every argument but ``plan`` (``proj`` (V, 3, 3, B)), the
+    factor's arrays have it last too. Under ``vmap`` (with ``plan`` shared) all members factor
+    at once, the batch innermost. A matrix that is not positive definite gives NaN in the
+    factor, and so in every :func:`solve_factored`.
     """
+    if proj.ndim == 4:
+        return _factor_batched(plan, blocks, proj, scale, mu)
     args = jax.tree.map(lambda a: jnp.asarray(a)[..., None], (blocks, proj, scale, mu))
     return jax.tree.map(lambda a: a[..., 0], _factor_batched(plan, *args))
 
 
-def factor_batch_last(
-    plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu: Array
-) -> Factor:
-    """:func:`factor` of a batch given with its axis last on every argument but ``plan``
-    (``blocks`` (E, 2, 2, 3, 3, B) and (H, 4, 4, 3, 3, B), ``proj`` (V, 3, 3, B), ``scale`` and
-    ``mu`` (B,)); the factor's arrays have it last too."""
-    return _factor_batched(plan, blocks, proj, scale, mu)
-
-
-@factor.def_vmap
-def _factor_vmap(axis_size, in_batched, plan, blocks, proj, scale, mu):
-    if any(jax.tree.leaves(in_batched[0])):  # a plan per member: no shared pattern
-        axes = jax.tree.map(lambda batched: 0 if batched else None, in_batched)
-        out = jax.vmap(factor.fun, in_axes=tuple(axes))(plan, blocks, proj, scale, mu)
-        return out, jax.tree.map(lambda _: True, out)
-    args = jax.tree.map(
-        lambda a, batched: (
-            _batch_last(a) if batched else jnp.broadcast_to(a[..., None], (*a.shape, axis_size))
-        ),
-        (blocks, proj, scale, mu),
-        tuple(in_batched[1:]),
-    )
-    # batch-first at the boundary: solve_factored moves it back (XLA cancels the transposes)
-    out = jax.tree.map(_batch_first, _factor_batched(plan, *args))
-    return out, jax.tree.map(lambda _: True, out)
+# vmapped, batch-first at the boundary: solve_factored moves it back (XLA cancels the transposes)
+factor = batch_innermost(_factor, index_args=(0,))
 
 
 @jax.custom_batching.custom_vmap

@@ -664,9 +664,7 @@ def _block_factor(
     """:func:`element_blocks` factored by :func:`blocksparse.factor` (``proj``, ``scale``,
     ``mu`` as there); vmapped, with the batch innermost from the positions to the factor."""
     blocks = element_blocks(x, structure, params, reference, exact)
-    if x.ndim == 2:
-        return blocksparse.factor(plan, blocks, proj, scale, mu)
-    return blocksparse.factor_batch_last(plan, blocks, proj, scale, mu)
+    return blocksparse.factor(plan, blocks, proj, scale, mu)
 
 
 _block_factor = batch_innermost(_block_factor, index_args=(0, 1))
