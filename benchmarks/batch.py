@@ -12,9 +12,11 @@ CPU device per core (``jax_num_cpu_devices``), which fold_batch uses by default;
 each set twice more: on one device, and padded to its size bucket (``share_topology=False``, as
 a set of mixed patterns would be). Each solver folds the whole set with one ``fold_batch`` call
 (after a first call on 256 of them that compiles it; compile time reported apart)
-and 64 of them (other ones for each row: none folded alone before) one by one with ``fold``
-(compiled beforehand); the ratio is folds
-per second of the batch over those of the loop, measured in the same run. The stream: 100
+and 64 of them (other ones for each row and repetition: none folded alone before) one by one
+with ``fold`` (compiled beforehand); the ratio is folds per second of the batch over those of
+the loop, measured in the same run. The Newton rows repeat the pair (batch, then loop) three
+times and report the medians, with the range of the rate and of the ratio: this machine's speed
+drifts by up to 2x within minutes, and each ratio pairs timings taken seconds apart. The stream: 100
 patterns of random kinds and sizes, each folded by its own ``fold_batch`` call, as they would
 arrive one at a time; we count the compilations. Writes ``batch_summary.csv``,
 ``batch_results.md`` and ``batch_throughput.png``.
@@ -76,11 +78,18 @@ def stream(n: int, seed: int = 1) -> list:
 
 
 def throughput(
-    cps: list, solver: str, loop_sample: slice, share_topology=None, devices=None
+    cps: list,
+    solver: str,
+    loop_samples: list[slice],
+    share_topology=None,
+    devices=None,
 ) -> dict:
     """``share_topology``: as in fold_batch (None: the default, shared index arrays for a set
     of one topology; False: padded to the size buckets); ``devices``: fold_batch's (None: all,
-    one per core)."""
+    one per core). One repetition per loop sample: the whole set with one fold_batch call, then
+    the sample one by one with fold(); the figures are the medians over the repetitions (this
+    machine's speed drifts by up to 2x within minutes, so each ratio pairs timings taken
+    seconds apart), with the range of the batch's rate and of the ratio."""
     kw = {
         "solver": solver,
         "progress": False,
@@ -91,19 +100,26 @@ def throughput(
     # compiles the slots' shape (the same for any set of 256 or more: slots and queue)
     warm = fold_batch(cps[:256], **kw)
     first_call = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    results = fold_batch(cps, **kw)
-    batch_time = time.perf_counter() - t0
     compile_time = max(r.compile_time for r in warm)
     fold(cps[0], solver=solver)  # compile the single solve
-    sample = cps[loop_sample]
-    t0 = time.perf_counter()
-    singles = [fold(cp, solver=solver) for cp in sample]
-    loop_time = (time.perf_counter() - t0) / len(sample)
-    diff = max(
-        float(np.max(np.abs(r.positions - s.positions)) / cp.diameter)
-        for r, s, cp in zip(results[loop_sample], singles, sample, strict=True)
-    )
+    batch_times, loop_times, diff = [], [], 0.0
+    for loop_sample in loop_samples:
+        t0 = time.perf_counter()
+        results = fold_batch(cps, **kw)
+        batch_times.append(time.perf_counter() - t0)
+        sample = cps[loop_sample]
+        t0 = time.perf_counter()
+        singles = [fold(cp, solver=solver) for cp in sample]
+        loop_times.append((time.perf_counter() - t0) / len(sample))
+        diff = max(
+            diff,
+            *(
+                float(np.max(np.abs(r.positions - s.positions)) / cp.diameter)
+                for r, s, cp in zip(results[loop_sample], singles, sample, strict=True)
+            ),
+        )
+    batch_rates = len(cps) / np.array(batch_times)
+    ratios = np.array(loop_times) * len(cps) / np.array(batch_times)
     sizes = problem_sizes(cps[0])
     topologies = len({(cp.mesh.triangles.tobytes(), cp.mesh.edges.tobytes()) for cp in cps})
     shared = share_topology is not False and topologies == 1
@@ -117,13 +133,22 @@ def throughput(
         "mean_iterations": float(np.mean([r.iterations for r in results])),
         "compile_time_s": compile_time,
         "first_call_s": first_call,
-        "batch_time_s": batch_time,
-        "batch_folds_per_s": len(cps) / batch_time,
-        "loop_folds_per_s": 1.0 / loop_time,
-        "speedup": loop_time * len(cps) / batch_time,
+        "repetitions": len(loop_samples),
+        "batch_time_s": float(np.median(batch_times)),
+        "batch_folds_per_s": float(np.median(batch_rates)),
+        "batch_folds_per_s_min": float(np.min(batch_rates)),
+        "batch_folds_per_s_max": float(np.max(batch_rates)),
+        "loop_folds_per_s": float(np.median(1.0 / np.array(loop_times))),
+        "speedup": float(np.median(ratios)),
+        "speedup_min": float(np.min(ratios)),
+        "speedup_max": float(np.max(ratios)),
         "max_position_diff_vs_single": diff,
         "max_fold_angle_error": max(r.fold_angle_error_max for r in results),
     }
+
+
+# repetitions of each Newton row (the others take seconds to minutes per batch: one)
+NEWTON_REPETITIONS = 3
 
 
 def main(out: Path, quick: bool = False) -> list[dict]:
@@ -134,12 +159,14 @@ def main(out: Path, quick: bool = False) -> list[dict]:
         # then Newton on one device, and padded to its size bucket, for the ratios in one run
         runs = [(s, None, None) for s in SOLVERS]
         runs += [("newton", None, jax.devices()[:1]), ("newton", False, None)]
+        reps = [NEWTON_REPETITIONS if solver == "newton" else 1 for solver, _, _ in runs]
+        # each repetition's loop folds patterns no single fold has seen (a pattern's first
+        # fold builds what later ones reuse, such as Newton's assembly layout)
+        m = min(64, n // sum(reps))
+        starts = np.cumsum([0] + reps) * m
         for k, (solver, share, devices) in enumerate(runs):
-            # each row's loop folds patterns no single fold has seen (a pattern's first fold
-            # builds what later ones reuse, such as Newton's assembly layout)
-            m = 16 if quick else 64
-            sample = slice(k * m, (k + 1) * m)
-            row = {"set": name, **throughput(cps, solver, sample, share, devices)}
+            samples = [slice(a, a + m) for a in range(starts[k], starts[k + 1], m)]
+            row = {"set": name, **throughput(cps, solver, samples, share, devices)}
             rows.append(row)
             print(
                 f"{name:14s} {solver:9s} {row['devices']} dev batch "
@@ -201,6 +228,14 @@ def update_stream(out: Path) -> None:
     md.write_text("\n".join(lines))
 
 
+def _ranged(r: dict, key: str, spec: str) -> str:
+    """``r[key]``, with its range over the repetitions when there were several."""
+    text = format(float(r[key]), spec)
+    if int(r.get("repetitions", 1)) > 1:
+        text += f" ({float(r[key + '_min']):{spec}}-{float(r[key + '_max']):{spec}})"
+    return text
+
+
 def write(rows: list[dict], out: Path) -> None:
     import csv
 
@@ -216,7 +251,8 @@ def write(rows: list[dict], out: Path) -> None:
         f"Measured {time.strftime('%Y-%m-%d')} on {usable_cores()} cores ({cpu_name()}), jax"
         f" {jax.__version__}, {device.platform}: {device.device_kind}; float64. Batch: one"
         " fold_batch call (compile excluded); loop: fold() one by one on 64 of them, other ones"
-        " for each row (compiled beforehand).",
+        " for each row and repetition (compiled beforehand). Newton rows: medians of"
+        f" {NEWTON_REPETITIONS} repetitions (batch, then loop), the range in brackets.",
         "",
         "| set | solver | problems | layout | devices | vertices solved | converged |"
         " mean iterations | compile (s) | batch (s) | batch folds/s | loop folds/s |"
@@ -230,8 +266,8 @@ def write(rows: list[dict], out: Path) -> None:
             f"| {r['set']} | {r['solver']} | {r['problems']} | {r['layout']} | "
             f"{r['devices']} | {r['solved_vertices']} | "
             f"{r['converged']} | {r['mean_iterations']:.0f} | {r['compile_time_s']:.1f} | "
-            f"{r['batch_time_s']:.2f} | {r['batch_folds_per_s']:.0f} | "
-            f"{r['loop_folds_per_s']:.0f} | {r['speedup']:.1f} | "
+            f"{r['batch_time_s']:.2f} | {_ranged(r, 'batch_folds_per_s', '.0f')} | "
+            f"{r['loop_folds_per_s']:.0f} | {_ranged(r, 'speedup', '.1f')} | "
             f"{r['max_position_diff_vs_single']:.1e} |"
         )
     for r in rows:
