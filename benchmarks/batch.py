@@ -134,6 +134,7 @@ def throughput(
         "compile_time_s": compile_time,
         "first_call_s": first_call,
         "repetitions": len(loop_samples),
+        "loop_problems": len(cps[loop_samples[0]]),
         "batch_time_s": float(np.median(batch_times)),
         "batch_folds_per_s": float(np.median(batch_rates)),
         "batch_folds_per_s_min": float(np.min(batch_rates)),
@@ -250,7 +251,8 @@ def write(rows: list[dict], out: Path) -> None:
     lines = [
         f"Measured {time.strftime('%Y-%m-%d')} on {usable_cores()} cores ({cpu_name()}), jax"
         f" {jax.__version__}, {device.platform}: {device.device_kind}; float64. Batch: one"
-        " fold_batch call (compile excluded); loop: fold() one by one on 64 of them, other ones"
+        " fold_batch call (compile excluded); loop: fold() one by one on"
+        f" {rows[0]['loop_problems']} of them, other ones"
         " for each row and repetition (compiled beforehand). Newton rows: medians of"
         f" {NEWTON_REPETITIONS} repetitions (batch, then loop), the range in brackets.",
         "",
