@@ -12,9 +12,9 @@ CPU device per core (``jax_num_cpu_devices``), which fold_batch uses by default;
 each set twice more: on one device, and padded to its size bucket (``share_topology=False``, as
 a set of mixed patterns would be). Each solver folds the whole set with one ``fold_batch`` call
 (after a first call on 256 of them that compiles it; compile time reported apart)
-and 64 of them (other ones for each row and repetition: none folded alone before) one by one
-with ``fold`` (compiled beforehand); the ratio is folds per second of the batch over those of
-the loop, measured in the same run. The Newton rows repeat the pair (batch, then loop) three
+and 64 of them (5 with --quick; other ones for each row and repetition: none folded alone
+before) one by one with ``fold`` (compiled beforehand); the ratio is folds per second of the
+batch over those of the loop, measured in the same run. The Newton rows repeat the pair (batch, then loop) three
 times and report the medians, with the range of the rate and of the ratio: this machine's speed
 drifts by up to 2x within minutes, and each ratio pairs timings taken seconds apart. The stream: 100
 patterns of random kinds and sizes, each folded by its own ``fold_batch`` call, as they would
@@ -101,7 +101,7 @@ def throughput(
     warm = fold_batch(cps[:256], **kw)
     first_call = time.perf_counter() - t0
     compile_time = max(r.compile_time for r in warm)
-    fold(cps[0], solver=solver)  # compile the single solve
+    fold(cps[-1], solver=solver)  # compile the single solve (on a pattern no loop folds)
     batch_times, loop_times, diff = [], [], 0.0
     for loop_sample in loop_samples:
         t0 = time.perf_counter()
