@@ -11,12 +11,12 @@ fold_batch vmaps it unpadded with shared index arrays (its default). The process
 CPU device per core (``jax_num_cpu_devices``), which fold_batch uses by default; Newton folds
 each set twice more: on one device, and padded to its size bucket (``share_topology=False``, as
 a set of mixed patterns would be). Each solver folds the whole set with one ``fold_batch`` call
-(after a first call on 256 of them that compiles it; compile time reported apart)
-and 64 of them (5 with --quick; other ones for each row and repetition: none folded alone
-before) one by one with ``fold`` (compiled beforehand); the ratio is folds per second of the
-batch over those of the loop, measured in the same run. The Newton rows repeat the pair (batch, then loop) three
-times and report the medians, with the range of the rate and of the ratio: this machine's speed
-drifts by up to 2x within minutes, and each ratio pairs timings taken seconds apart. The stream: 100
+(after a first call on 256 of them that compiles it; compile time reported apart) and 64 of
+them (5 with --quick; other ones for each row and repetition: none folded alone before) one by
+one with ``fold`` (compiled beforehand); the ratio is folds per second of the batch over those
+of the loop, measured in the same run. The Newton rows repeat the pair (batch, then loop) three
+times and report the medians, with the range of the rate and of the ratio (see
+:func:`throughput`). The stream: 100
 patterns of random kinds and sizes, each folded by its own ``fold_batch`` call, as they would
 arrive one at a time; we count the compilations. Writes ``batch_summary.csv``,
 ``batch_results.md`` and ``batch_throughput.png``.
