@@ -31,7 +31,7 @@ slowest member of a chunk, nor for the host). With several devices the slots and
 split across them (``jax.shard_map``). Each call runs about a tenth of a second of iterations;
 the next one is dispatched before the host reads the results of the last, shows progress and
 hands the finished problems on; an interrupted batch (Ctrl-C) returns the problems already
-done. Few slots suit CPUs (:data:`CPU_SLOTS` per device: one device's slots stay in its
+done. Few slots suit CPUs (:data:`CPU_SLOTS`, 32 per device: one device's slots stay in its
 caches): on 2026-12-04 (``benchmarks/batch.py``, 2 CPU devices, 32 slots) 1,024 Miura-ori
 4 x 4 variants folded at 2,147 folds/s, where slots refilled by the host between calls (256
 of them, the design before) reached 1,086.
@@ -360,8 +360,12 @@ def compile_count() -> int:
 
 
 # default slots per device: on CPUs few, so that one device's slots stay in its caches (with
-# continuous batching nothing is gained by more); elsewhere (GPUs) many
-CPU_SLOTS = 16
+# continuous batching nothing is gained by more); elsewhere (GPUs) many. 32 per CPU device
+# against 16, 2026-12-06 (2 devices, the benchmark's 1,024-problem sets, fold_batch calls
+# alternating in one process, medians of 5 to 7 rounds): waterbomb 2 x 2 +3 to +8 % in four
+# runs, Miura-ori 4 x 4 -1 and +7 % in two; 64 per device gave the waterbomb less than 32 in
+# both runs that compared them
+CPU_SLOTS = 32
 SLOTS = 256
 
 
