@@ -35,9 +35,6 @@ import jax  # noqa: E402
 from cores import cpu_name, usable_cores  # noqa: E402 (benchmarks/, the script's folder)
 
 jax.config.update("jax_enable_x64", True)
-# one JAX device per core: fold_batch splits its slots across them and they run in parallel
-# (XLA runs one device's small batched kernels on about one core)
-jax.config.update("jax_num_cpu_devices", usable_cores())
 
 import numpy as np  # noqa: E402
 
@@ -313,6 +310,10 @@ def plot(data: list[dict], out: Path) -> None:
 
 
 if __name__ == "__main__":
+    # one JAX device per core: fold_batch splits its slots across them and they run in parallel
+    # (XLA runs one device's small batched kernels on about one core). Set here, not on import,
+    # so that a script importing problem_sets keeps its own device count (run.py sets its own).
+    jax.config.update("jax_num_cpu_devices", usable_cores())
     if "--stream" in sys.argv:  # only the stream, into the files of an earlier full run
         update_stream(Path(__file__).parent / "results")
     else:
