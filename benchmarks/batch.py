@@ -7,10 +7,11 @@ compile count of a stream of patterns of random sizes.
 Problems: 1,024 Miura-ori 4 x 4 with random sector angles (50 to 80 degrees) and fold angles
 (0.3 to 2.5 rad), and 1,024 waterbomb tessellations 2 x 2 with random fold angles (0.3 to 2.5
 rad), all triangulated beforehand (in neither timing); each set is of one topology, so
-fold_batch vmaps it unpadded with shared index arrays (its default). The process makes one JAX
-CPU device per core (``jax_num_cpu_devices``), which fold_batch uses by default; Newton folds
-each set twice more: on one device, and padded to its size bucket (``share_topology=False``, as
-a set of mixed patterns would be). Each solver folds the whole set with one ``fold_batch`` call
+fold_batch vmaps it unpadded with shared index arrays (its default). The process makes two JAX
+CPU devices per core (``jax_num_cpu_devices``, see ``cores.DEVICES_PER_CORE``), which
+fold_batch uses by default; Newton folds each set three times more: on one device per core, on
+one device, and padded to its size bucket (``share_topology=False``, as a set of mixed patterns
+would be). Each solver folds the whole set with one ``fold_batch`` call
 (after a first call on 256 of them that compiles it; compile time reported apart) and 64 of
 them (5 with --quick; other ones for each row and repetition: none folded alone before) one by
 one with ``fold`` (compiled beforehand); the ratio is folds per second of the batch over those
@@ -32,7 +33,7 @@ from pathlib import Path
 os.environ.setdefault("JAX_ENABLE_X64", "1")
 
 import jax  # noqa: E402
-from cores import cpu_name, usable_cores  # noqa: E402 (benchmarks/, the script's folder)
+from cores import cpu_devices, cpu_name, usable_cores  # noqa: E402 (benchmarks/, the script's folder)
 
 jax.config.update("jax_enable_x64", True)
 
@@ -74,75 +75,93 @@ def stream(n: int, seed: int = 1) -> list:
     return out
 
 
-def throughput(
-    cps: list,
-    solver: str,
-    loop_samples: list[slice],
-    share_topology=None,
-    devices=None,
-) -> dict:
-    """``share_topology``: as in fold_batch (None: the default, shared index arrays for a set
-    of one topology; False: padded to the size buckets); ``devices``: fold_batch's (None: all,
-    one per core). One repetition per loop sample: the whole set with one fold_batch call, then
-    the sample one by one with fold(); the figures are the medians over the repetitions (this
-    machine's speed drifts by up to 2x within minutes, so each ratio pairs timings taken
-    seconds apart), with the range of the batch's rate and of the ratio."""
-    kw = {
-        "solver": solver,
-        "progress": False,
-        "share_topology": share_topology,
-        "devices": devices,
-    }
-    t0 = time.perf_counter()
-    # compiles the slots' shape (the same for any set of 256 or more: slots and queue)
-    warm = fold_batch(cps[:256], **kw)
-    first_call = time.perf_counter() - t0
-    compile_time = max(r.compile_time for r in warm)
-    fold(cps[-1], solver=solver)  # compile the single solve (on a pattern no loop folds)
-    batch_times, loop_times, diff = [], [], 0.0
-    for loop_sample in loop_samples:
+def throughput(runs: list[tuple], cps: list) -> list[dict]:
+    """One row per run ``(solver, share_topology, devices, loop_samples)`` over the set ``cps``.
+
+    ``share_topology``: as in fold_batch (None: the default, shared index arrays for a set of one
+    topology; False: padded to the size buckets); ``devices``: fold_batch's (None: all, two per
+    core). One repetition per loop sample: the whole set with one fold_batch call, then the
+    sample one by one with fold(). The runs take their repetitions in turn (the first of each,
+    then the second of each...), so that rows compare in the same spells of this machine, whose
+    speed drifts by up to 2x within minutes; the figures are the medians over a run's
+    repetitions (each ratio pairs timings taken seconds apart), with the range of the batch's
+    rate and of the ratio."""
+    rows = []
+    for solver, share_topology, devices, _ in runs:
+        kw = {
+            "solver": solver,
+            "progress": False,
+            "share_topology": share_topology,
+            "devices": devices,
+        }
         t0 = time.perf_counter()
-        results = fold_batch(cps, **kw)
-        batch_times.append(time.perf_counter() - t0)
-        sample = cps[loop_sample]
-        t0 = time.perf_counter()
-        singles = [fold(cp, solver=solver) for cp in sample]
-        loop_times.append((time.perf_counter() - t0) / len(sample))
-        diff = max(
-            diff,
-            *(
-                float(np.max(np.abs(r.positions - s.positions)) / cp.diameter)
-                for r, s, cp in zip(results[loop_sample], singles, sample, strict=True)
-            ),
+        # compiles the slots' shape (the same for any set of 256 or more: slots and queue)
+        warm = fold_batch(cps[:256], **kw)
+        rows.append(
+            {
+                "kw": kw,
+                "first_call": time.perf_counter() - t0,
+                "compile_time": max(r.compile_time for r in warm),
+                "batch": [],
+                "loop": [],
+                "diff": 0.0,
+            }
         )
-    batch_rates = len(cps) / np.array(batch_times)
-    ratios = np.array(loop_times) * len(cps) / np.array(batch_times)
+    for solver in {run[0] for run in runs}:
+        fold(cps[-1], solver=solver)  # compile the single solve (on a pattern no loop folds)
+    for k in range(max(len(run[3]) for run in runs)):
+        for (solver, _, _, samples), row in zip(runs, rows, strict=True):
+            if k >= len(samples):
+                continue
+            t0 = time.perf_counter()
+            results = fold_batch(cps, **row["kw"])
+            row["batch"].append(time.perf_counter() - t0)
+            sample = cps[samples[k]]
+            t0 = time.perf_counter()
+            singles = [fold(cp, solver=solver) for cp in sample]
+            row["loop"].append((time.perf_counter() - t0) / len(sample))
+            row["results"] = results
+            row["diff"] = max(
+                row["diff"],
+                *(
+                    float(np.max(np.abs(r.positions - s.positions)) / cp.diameter)
+                    for r, s, cp in zip(results[samples[k]], singles, sample, strict=True)
+                ),
+            )
     sizes = problem_sizes(cps[0])
     topologies = len({(cp.mesh.triangles.tobytes(), cp.mesh.edges.tobytes()) for cp in cps})
-    shared = share_topology is not False and topologies == 1
-    return {
-        "solver": solver,
-        "problems": len(cps),
-        "layout": "shared topology" if shared else "size buckets",
-        "devices": len(devices or jax.devices()),
-        "solved_vertices": sizes.vertices if shared else bucket(sizes).vertices,
-        "converged": sum(r.converged for r in results),
-        "mean_iterations": float(np.mean([r.iterations for r in results])),
-        "compile_time_s": compile_time,
-        "first_call_s": first_call,
-        "repetitions": len(loop_samples),
-        "loop_problems": len(cps[loop_samples[0]]),
-        "batch_time_s": float(np.median(batch_times)),
-        "batch_folds_per_s": float(np.median(batch_rates)),
-        "batch_folds_per_s_min": float(np.min(batch_rates)),
-        "batch_folds_per_s_max": float(np.max(batch_rates)),
-        "loop_folds_per_s": float(np.median(1.0 / np.array(loop_times))),
-        "speedup": float(np.median(ratios)),
-        "speedup_min": float(np.min(ratios)),
-        "speedup_max": float(np.max(ratios)),
-        "max_position_diff_vs_single": diff,
-        "max_fold_angle_error": max(r.fold_angle_error_max for r in results),
-    }
+    out = []
+    for (solver, share_topology, devices, samples), row in zip(runs, rows, strict=True):
+        results = row["results"]
+        batch_rates = len(cps) / np.array(row["batch"])
+        ratios = np.array(row["loop"]) * len(cps) / np.array(row["batch"])
+        shared = share_topology is not False and topologies == 1
+        out.append(
+            {
+                "solver": solver,
+                "problems": len(cps),
+                "layout": "shared topology" if shared else "size buckets",
+                "devices": len(devices or jax.devices()),
+                "solved_vertices": sizes.vertices if shared else bucket(sizes).vertices,
+                "converged": sum(r.converged for r in results),
+                "mean_iterations": float(np.mean([r.iterations for r in results])),
+                "compile_time_s": row["compile_time"],
+                "first_call_s": row["first_call"],
+                "repetitions": len(samples),
+                "loop_problems": len(cps[samples[0]]),
+                "batch_time_s": float(np.median(row["batch"])),
+                "batch_folds_per_s": float(np.median(batch_rates)),
+                "batch_folds_per_s_min": float(np.min(batch_rates)),
+                "batch_folds_per_s_max": float(np.max(batch_rates)),
+                "loop_folds_per_s": float(np.median(1.0 / np.array(row["loop"]))),
+                "speedup": float(np.median(ratios)),
+                "speedup_min": float(np.min(ratios)),
+                "speedup_max": float(np.max(ratios)),
+                "max_position_diff_vs_single": row["diff"],
+                "max_fold_angle_error": max(r.fold_angle_error_max for r in results),
+            }
+        )
+    return out
 
 
 # repetitions of each Newton row (the others take seconds to minutes per batch: one)
@@ -153,21 +172,31 @@ def main(out: Path, quick: bool = False) -> list[dict]:
     n = 64 if quick else 1024
     rows = []
     for name, cps in problem_sets(n).items():
-        # the solvers with the defaults (one topology: shared index arrays; all devices),
-        # then Newton on one device, and padded to its size bucket, for the ratios in one run
-        runs = [(s, None, None) for s in SOLVERS]
-        runs += [("newton", None, jax.devices()[:1]), ("newton", False, None)]
-        reps = [NEWTON_REPETITIONS if solver == "newton" else 1 for solver, _, _ in runs]
+        # Newton with the defaults (one topology: shared index arrays; all devices), on one
+        # device per core, on one device, and padded to its size bucket, its repetitions taken
+        # in turn; then the other solvers with the defaults
+        configs = [("newton", None, None)]
+        if len(jax.devices()) > usable_cores():
+            configs.append(("newton", None, jax.devices()[: usable_cores()]))
+        configs += [("newton", None, jax.devices()[:1]), ("newton", False, None)]
+        configs += [(s, None, None) for s in SOLVERS if s != "newton"]
+        reps = [NEWTON_REPETITIONS if solver == "newton" else 1 for solver, _, _ in configs]
         # each repetition's loop folds patterns no single fold has seen (a pattern's first
         # fold builds what later ones reuse, such as Newton's assembly layout)
         m = min(64, n // sum(reps))
         starts = np.cumsum([0] + reps) * m
-        for k, (solver, share, devices) in enumerate(runs):
-            samples = [slice(a, a + m) for a in range(starts[k], starts[k + 1], m)]
-            row = {"set": name, **throughput(cps, solver, samples, share, devices)}
+        runs = [
+            (*config, [slice(a, a + m) for a in range(starts[k], starts[k + 1], m)])
+            for k, config in enumerate(configs)
+        ]
+        newton = [run for run in runs if run[0] == "newton"]
+        others = [run for run in runs if run[0] != "newton"]
+        measured = throughput(newton, cps) + [throughput([run], cps)[0] for run in others]
+        for run, row in zip(newton + others, measured, strict=True):
+            row = {"set": name, **row}
             rows.append(row)
             print(
-                f"{name:14s} {solver:9s} {row['devices']} dev batch "
+                f"{name:14s} {run[0]:9s} {row['devices']} dev {row['layout']:15s} batch "
                 f"{row['batch_folds_per_s']:8.1f} folds/s  loop "
                 f"{row['loop_folds_per_s']:7.1f} folds/s  x{row['speedup']:.1f}  "
                 f"{row['converged']}/{n} converged  compile {row['compile_time_s']:.1f} s",
@@ -294,7 +323,7 @@ def plot(data: list[dict], out: Path) -> None:
         r["set"].replace("_", "\n", 1)
         + f"\n{r['solver']}"
         + ("\n(buckets)" if r["layout"] == "size buckets" else "")
-        + ("\n(1 device)" if int(r["devices"]) == 1 and len(jax.devices()) > 1 else "")
+        + (f"\n({r['devices']} devices)" if int(r["devices"]) < len(jax.devices()) else "")
         for r in data
     ]
     pos = np.arange(len(data))
@@ -310,10 +339,10 @@ def plot(data: list[dict], out: Path) -> None:
 
 
 if __name__ == "__main__":
-    # one JAX device per core: fold_batch splits its slots across them and they run in parallel
-    # (XLA runs one device's small batched kernels on about one core). Set here, not on import,
-    # so that a script importing problem_sets keeps its own device count (run.py sets its own).
-    jax.config.update("jax_num_cpu_devices", usable_cores())
+    # two JAX devices per core (cores.DEVICES_PER_CORE): fold_batch splits its slots across
+    # them and they run side by side. Set here, not on import, so that a script importing
+    # problem_sets keeps its own device count (run.py sets its own).
+    jax.config.update("jax_num_cpu_devices", cpu_devices())
     if "--stream" in sys.argv:  # only the stream, into the files of an earlier full run
         update_stream(Path(__file__).parent / "results")
     else:

@@ -14,6 +14,19 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
+# JAX CPU devices per core for fold_batch. A device runs its slots' kernels one after another
+# on about one core and now and then waits (between kernels, for the host): with one device per
+# core 1.66-1.74 of this machine's 2 cores were busy, with two 1.77-1.86, and fold_batch folded
+# more in all 21 alternating rounds in one process (medians +12 to +16 %; 2026-12-06, README,
+# "Several devices").
+DEVICES_PER_CORE = 2
+
+
+def cpu_devices() -> int:
+    """The JAX CPU devices the benchmarks make: :data:`DEVICES_PER_CORE` per usable core."""
+    return DEVICES_PER_CORE * usable_cores()
+
+
 def cpu_name() -> str:
     """The CPU's model as the OS names it (with its family and model numbers on Linux): the
     same 2-core machine has come with different CPUs from day to day, so reports name it."""
