@@ -69,6 +69,7 @@ from origami_jax.fold import (
     FoldResult,
     _reason,
     _signature,
+    checked_start,
     default_tol,
     measured,
     next_chunk,
@@ -250,20 +251,8 @@ def _padded_aux(solver: Solver, member: _Member, problem: Problem, to: BatchSize
 
 def _start(index: int, pattern: CreasePattern, start) -> np.ndarray:
     """The checked (V, 3) start of problem ``index`` (the pattern's own, else flat)."""
-    mesh = pattern.mesh
-    if start is None and pattern.start is not None:
-        start = pattern.start[mesh.source_vertex]
-    if start is None:  # flat: the mesh's vertices, checked when the pattern was made
-        return np.asarray(mesh.vertices, np.float64)
-    start = np.asarray(start, np.float64)
-    if start.shape != mesh.vertices.shape:
-        raise PatternError(
-            f"start {index}: expected shape {mesh.vertices.shape}, got {start.shape}"
-        )
-    bad = ~np.isfinite(start).all(axis=1)
-    if bad.any():
-        raise PatternError(f"start {index}: vertex {int(np.flatnonzero(bad)[0])} is not finite")
-    return start
+    start = checked_start(pattern, start, f"start {index}")
+    return np.asarray(pattern.mesh.vertices, np.float64) if start is None else start
 
 
 def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:

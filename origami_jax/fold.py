@@ -279,6 +279,25 @@ def _reason(status: Status, m: dict, tol: float, iterations: int, x: np.ndarray,
     }[status] + (f"; {note}" if note else "")
 
 
+def checked_start(pattern: CreasePattern, start, name: str = "start") -> np.ndarray | None:
+    """The (V_mesh, 3) float64 start of a fold of ``pattern``: ``start``, else the pattern's own
+    (a pre-folded input), else ``None`` (flat: the mesh's vertices, checked when the pattern was
+    made). Raises :class:`PatternError` naming ``name`` and the first vertex that is not finite,
+    or the shape expected."""
+    mesh = pattern.mesh
+    if start is None and pattern.start is not None:
+        start = pattern.start[mesh.source_vertex]
+    if start is None:
+        return None
+    start = np.asarray(start, np.float64)
+    if start.shape != mesh.vertices.shape:
+        raise PatternError(f"{name}: expected shape {mesh.vertices.shape}, got {start.shape}")
+    bad = ~np.isfinite(start).all(axis=1)
+    if bad.any():
+        raise PatternError(f"{name}: vertex {int(np.flatnonzero(bad)[0])} is not finite")
+    return start
+
+
 def fold(
     pattern: CreasePattern,
     percent: float = 1.0,
@@ -345,15 +364,7 @@ def fold(
         )
     tol = default_tol(dtype) if tol is None else float(tol)
     mesh = pattern.mesh
-    if start is None and pattern.start is not None:
-        start = pattern.start[mesh.source_vertex]
-    if start is not None:
-        start = np.asarray(start, np.float64)
-        if start.shape != mesh.vertices.shape:
-            raise PatternError(f"start: expected shape {mesh.vertices.shape}, got {start.shape}")
-        bad = ~np.isfinite(start).all(axis=1)
-        if bad.any():
-            raise PatternError(f"start: vertex {int(np.flatnonzero(bad)[0])} is not finite")
+    start = checked_start(pattern, start)
     if params is None:
         params = make_params(pattern, percent, stiffness, dtype)
     else:
