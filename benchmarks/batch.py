@@ -13,7 +13,7 @@ fold_batch uses by default; Newton folds each set three times more: on one devic
 one device, and padded to its size bucket (``share_topology=False``, as a set of mixed patterns
 would be). Each solver folds the whole set with one ``fold_batch`` call
 (after a first call on 256 of them that compiles it; compile time reported apart) and 64 of
-them (5 with --quick; other ones for each row and repetition: none folded alone before) one by
+them (4 with --quick; other ones for each row and repetition: none folded alone before) one by
 one with ``fold`` (compiled beforehand); the ratio is folds per second of the batch over those
 of the loop, measured in the same run. The Newton rows repeat the pair (batch, then loop) three
 times and report the medians, with the range of the rate and of the ratio (see
@@ -33,7 +33,7 @@ from pathlib import Path
 os.environ.setdefault("JAX_ENABLE_X64", "1")
 
 import jax  # noqa: E402
-from cores import cpu_devices, cpu_name, usable_cores  # noqa: E402 (benchmarks/, the script's folder)
+from cores import cpu_devices, cpu_name, usable_cores  # noqa: E402 (benchmarks/)
 
 jax.config.update("jax_enable_x64", True)
 
@@ -176,7 +176,7 @@ def main(out: Path, quick: bool = False) -> list[dict]:
         # device per core, on one device, and padded to its size bucket, its repetitions taken
         # in turn; then the other solvers with the defaults
         configs = [("newton", None, None)]
-        if len(jax.devices()) > usable_cores():
+        if 1 < usable_cores() < len(jax.devices()):
             configs.append(("newton", None, jax.devices()[: usable_cores()]))
         configs += [("newton", None, jax.devices()[:1]), ("newton", False, None)]
         configs += [(s, None, None) for s in SOLVERS if s != "newton"]
@@ -280,7 +280,8 @@ def write(rows: list[dict], out: Path) -> None:
         " fold_batch call (compile excluded); loop: fold() one by one on"
         f" {rows[0]['loop_problems']} of them, other ones"
         " for each row and repetition (compiled beforehand). Newton rows: medians of"
-        f" {NEWTON_REPETITIONS} repetitions (batch, then loop), the range in brackets.",
+        f" {NEWTON_REPETITIONS} repetitions (batch, then loop; a set's Newton rows take theirs"
+        " in turn), the range in brackets.",
         "",
         "| set | solver | problems | layout | devices | vertices solved | converged |"
         " mean iterations | compile (s) | batch (s) | batch folds/s | loop folds/s |"
@@ -323,7 +324,11 @@ def plot(data: list[dict], out: Path) -> None:
         r["set"].replace("_", "\n", 1)
         + f"\n{r['solver']}"
         + ("\n(buckets)" if r["layout"] == "size buckets" else "")
-        + (f"\n({r['devices']} devices)" if int(r["devices"]) < len(jax.devices()) else "")
+        + (
+            f"\n({r['devices']} device{'s' * (int(r['devices']) > 1)})"
+            if int(r["devices"]) < len(jax.devices())
+            else ""
+        )
         for r in data
     ]
     pos = np.arange(len(data))

@@ -44,7 +44,7 @@ from pathlib import Path
 os.environ.setdefault("JAX_ENABLE_X64", "1")
 
 import jax  # noqa: E402
-from cores import cpu_devices, cpu_name, usable_cores  # noqa: E402 (benchmarks/, the script's folder)
+from cores import cpu_devices, cpu_name, usable_cores  # noqa: E402 (benchmarks/)
 
 jax.config.update("jax_enable_x64", True)
 # two JAX devices per core, as benchmarks/batch.py (fold() uses the first; fold_batch all)
