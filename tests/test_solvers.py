@@ -187,10 +187,11 @@ def test_exact_attempts_are_shifted_after_repeated_rejections():
     Levenberg-Marquardt shift (``shift_min`` first, 10x more with each rejection, 10x less
     with each exact step taken). At a compressed start (a Miura-ori 3 x 3 at 0.8 of its size)
     the exact Hessian is indefinite and its dense attempt is rejected; a large shift makes it
-    factor, and the step it gives is not the convex part's, which the shift leaves alone."""
+    factor, and the step it gives is not the convex part's, which the shift leaves alone. (The
+    buckling check would skip these attempts: off here, tested below.)"""
     cp = patterns.miura_ori(3, 3)
     mesh = cp.mesh
-    dense = Newton(linear_solver="dense")
+    dense = Newton(linear_solver="dense", buckling_ratio=float("inf"))
     problem = make_problem(mesh, make_structure(mesh), make_params(cp), 0.8 * mesh.vertices, 1e-9)
     problem = prepare(dense, problem, mesh)
     s0 = dense.init(problem)
@@ -223,14 +224,85 @@ def test_exact_attempts_are_shifted_after_repeated_rejections():
     assert int(taken.failures) == 0 and float(taken.shift) == pytest.approx(1.0)
 
 
+def test_vertex_buckling_is_the_compressed_bars_softening_against_the_hinges_support():
+    """Per vertex: the compressed bars' ``axial / l0 (l0 / l - 1)`` summed, and the trace of
+    the hinges' Gauss-Newton blocks (the convex part's hinge blocks); vmapped (batch innermost)
+    the same per member."""
+    from origami_jax.energy import initial_reference
+    from origami_jax.solvers.newton import _vertex_buckling, element_blocks
+
+    cp = patterns.waterbomb(1, 1, fold_angle=2.0)
+    mesh = cp.mesh
+    structure, params = make_structure(mesh), make_params(cp)
+    rng = np.random.default_rng(3)
+    xs = rigid_fold(cp, 0.3 * mesh.target) * rng.uniform(0.97, 1.03, (2, mesh.num_vertices, 1))
+    bars, hinges = np.asarray(structure.bars), np.asarray(structure.hinges)
+    l0 = np.asarray(params.rest_length)
+    for x in xs:
+        length = np.linalg.norm(x[bars[:, 1]] - x[bars[:, 0]], axis=1)
+        soft = np.maximum(l0 / length - 1, 0) / l0  # axial stiffness 1
+        expected = np.zeros(mesh.num_vertices)
+        np.add.at(expected, bars[:, 0], soft)
+        np.add.at(expected, bars[:, 1], soft)
+        hinge_blocks = element_blocks(
+            jnp.asarray(x), structure, params, initial_reference(x, structure, params), False
+        )[1]
+        traces = np.trace(np.asarray(hinge_blocks)[:, range(4), range(4)], axis1=2, axis2=3)
+        support = np.zeros(mesh.num_vertices)
+        np.add.at(support, hinges.ravel(), traces.ravel())
+        softening, got = _vertex_buckling(jnp.asarray(x), structure, params)
+        assert np.max(expected) > 0 and np.min(expected) == 0
+        np.testing.assert_allclose(softening, expected, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(got, support, rtol=1e-12)
+    batched = jax.vmap(_vertex_buckling, in_axes=(0, None, None))(
+        jnp.asarray(xs), structure, params
+    )
+    for i, x in enumerate(xs):
+        single = _vertex_buckling(jnp.asarray(x), structure, params)
+        np.testing.assert_allclose(batched[0][i], single[0], rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(batched[1][i], single[1], rtol=1e-12)
+
+
+def test_exact_attempts_are_skipped_where_compressed_bars_buckle_the_sheet():
+    """After one convex step from flat, a waterbomb base's compressed bars outweigh its hinges'
+    support at some vertex, and there its exact Hessian does not factor: asked for it, Newton
+    without the check spends the iteration (a rejection), with it takes the convex step (the
+    same as asked for the convex part) and counts no rejection. Near equilibrium (the gradient
+    below ``buckling_far`` of its start) the check is off and the attempt goes ahead."""
+    from origami_jax.solvers.newton import _vertex_buckling
+
+    cp = patterns.waterbomb(1, 1, fold_angle=2.5)
+    mesh = cp.mesh
+    checked, unchecked = Newton(), Newton(buckling_ratio=float("inf"))
+    problem = make_problem(mesh, make_structure(mesh), make_params(cp), None, 1e-10)
+    problem = prepare(checked, problem, mesh)
+    step = jax.jit(lambda solver, s: solver.step(s, problem), static_argnums=0)
+    s = step(checked, checked.init(problem)._replace(exact=jnp.asarray(False)))
+    softening, support = _vertex_buckling(
+        positions(problem, s.u), problem.structure, problem.params
+    )
+    assert np.max(np.asarray(softening) / np.asarray(support)) > checked.buckling_ratio
+    assert float(s.grad_max) > checked.buckling_far * float(s.grad_max0)
+    ask = s._replace(exact=jnp.asarray(True))
+    spent = step(unchecked, ask)
+    assert int(spent.failures) == 1 and float(spent.energy) == float(s.energy)
+    skipped = step(checked, ask)
+    convex = step(checked, s._replace(exact=jnp.asarray(False)))
+    assert int(skipped.failures) == 0 and float(skipped.energy) < float(s.energy)
+    np.testing.assert_array_equal(skipped.u, convex.u)
+    near = ask._replace(grad_max0=s.grad_max / (0.5 * checked.buckling_far))
+    assert int(step(checked, near).failures) == 1
+
+
 def test_the_hand_over_takes_the_same_steps_as_an_iteration_spent():
     """A sparse fold hands failed exact attempts over within the iteration; a dense one spends
     an iteration on each: the same end, in fewer iterations (Miura-ori 10 x 10; with exact
     attempts after every unexpanded full step, as ``convex_rate=0``, the default, makes
-    them)."""
+    them; the buckling check off, which would skip the attempts that fail here)."""
     cp = patterns.miura_ori(10, 10)
-    dense = fold(cp, solver=Newton(linear_solver="dense", convex_rate=0.0), tol=1e-10)
-    sparse = fold(cp, solver=Newton(linear_solver="sparse", convex_rate=0.0), tol=1e-10)
+    unchecked = {"convex_rate": 0.0, "buckling_ratio": float("inf")}
+    dense = fold(cp, solver=Newton(linear_solver="dense", **unchecked), tol=1e-10)
+    sparse = fold(cp, solver=Newton(linear_solver="sparse", **unchecked), tol=1e-10)
     assert dense.converged and sparse.converged
     assert sparse.iterations < dense.iterations
     np.testing.assert_allclose(sparse.positions, dense.positions, atol=1e-10 * cp.diameter)

@@ -25,7 +25,10 @@ Hessian can be indefinite, so the method works with two matrices:
   attempt costs the iteration. After the n-th rejected exact attempt in a row the next waits
   for 2^n - 1 full convex steps (at most 15): on box.fold, where they alternated, that took
   259 iterations down to 59. After ``shift_after`` rejections in a row, exact attempts are
-  shifted (see there).
+  shifted (see there). Far from equilibrium an exact attempt is skipped (the iteration takes the
+  convex part, and no rejection is counted) where the compressed bars at some vertex outweigh
+  the out-of-plane support of its hinges (``buckling_ratio``): there the exact Hessian is
+  mostly indefinite.
 
 A Levenberg-Marquardt shift ``mu * |diag(H)|`` (``mu`` from ``mu_min``, grown 10x, from at least
 1e-10, whenever no step is found, and shrunk 10x with every step taken) keeps the system
@@ -531,6 +534,28 @@ def _hinge_angles(x: Array, structure: Structure, reference: Array) -> Array:
     return fold_angles(x, structure.hinges, reference)
 
 
+def _vertex_buckling(x: Array, structure: Structure, params) -> tuple[Array, Array]:
+    """(V,) at each vertex, the negative transverse stiffness of its compressed bars,
+    ``sum axial / l0 (l0 / l - 1)``, and the stiffness its hinges give it out of their planes,
+    ``sum stiffness l0 |grad(rho)|^2`` (the trace of their Gauss-Newton blocks there): where the
+    first exceeds the second, the compressed bars buckle the sheet and the exact Hessian is
+    indefinite (see ``Newton.buckling_ratio``)."""
+    trailing = x.shape[2:]
+    bars = structure.bars
+    l0 = params.rest_length
+    d = x[bars[:, 1]] - x[bars[:, 0]]
+    length = jnp.sqrt(jnp.sum(d * d, axis=1))
+    soft = params.stiffness.axial / l0 * jnp.maximum(l0 / length - 1.0, 0.0)
+    zeros = jnp.zeros((x.shape[0], *trailing), x.dtype)
+    softening = zeros.at[bars[:, 0]].add(soft).at[bars[:, 1]].add(soft)
+    if not structure.hinges.shape[0]:
+        return softening, zeros
+    g = dihedral_gradients(x[structure.hinges])
+    _, stiffness = hinge_goals(structure, params)
+    support = (stiffness * l0[structure.hinge_bars])[:, None] * jnp.sum(g * g, axis=2)
+    return softening, zeros.at[structure.hinges.reshape(-1)].add(support.reshape(-1, *trailing))
+
+
 def _energy_and_gradient(x: Array, structure: Structure, params, reference: Array):
     value, pullback = jax.vjp(lambda y: energy(y, structure, params, reference), x)
     return value, pullback(jnp.ones_like(value))[0]
@@ -542,6 +567,7 @@ _element_work = batch_innermost(_element_work, index_args=(1,))
 _hinge_angles = batch_innermost(_hinge_angles, index_args=(1,))
 _energy_and_gradient = batch_innermost(_energy_and_gradient, index_args=(1,))
 _energy = batch_innermost(energy, index_args=(1,))
+_vertex_buckling = batch_innermost(_vertex_buckling, index_args=(1,))
 
 
 def _value_and_grad(u: Array, problem: Problem, reference: Array):
@@ -785,6 +811,27 @@ class Newton:
         cuts 187, but Miura-ori 10 x 10 at a stiffness ratio of 1e8 88 -> 98; after 2: Miura-ori
         100 x 100 15 -> 17. ``10**9`` turns it off (it is compared with an int32 count, so
         keep it below 2**31).
+      buckling_ratio: an exact attempt is skipped (the iteration takes the convex part and
+        counts no rejection) while, at some vertex, the negative transverse stiffness of the
+        compressed bars, ``sum axial / l0 (l0 / l - 1)``, exceeds this times the stiffness its
+        hinges give it out of their planes, ``sum stiffness l0 |grad(rho)|^2``: such bars
+        buckle the sheet there and the exact Hessian is mostly indefinite (on a waterbomb
+        2 x 2 every dense attempt in that state failed to factor and cost its iteration).
+        ``inf``: never skipped. Only far from equilibrium (``buckling_far``). Measured on
+        2026-12-06 (float64, dense, tol 1e-10), ``inf`` -> 1: 64 of the batch benchmark's
+        waterbomb 2 x 2 variants 13.67 -> 11.98 mean iterations, the Miura-ori 4 x 4 variants
+        7.19 either way; the benchmark scenes, stiffness sweep and shared files (38 of them,
+        hinges.svg apart) 1,384 -> 1,381 iterations in all, most equal or fewer (Origami Simulator's
+        flappingBird.svg 60 -> 48, waterbomb.svg 53 -> 50, the seed's scene 11 -> 10), but
+        opacityExamples.svg 73 -> 101 and simplePatterns.svg 59 -> 64; Miura-ori 100 x 100 15
+        and hinges.svg 4,778 either way. 0.7 and 2 gave the waterbomb variants 11.80 and
+        12.34.
+      buckling_far: ``buckling_ratio`` applies while the gradient (its largest gauged entry)
+        is above this fraction of its start value. Near equilibrium a folded sheet's other
+        bars hold such a vertex and the exact Hessian factors: applied there too, box.fold
+        took 103 iterations instead of 52, flappingBird.svg 139, waterbomb.svg 99, and
+        hinges.svg no longer converged (13,527). 0.05 and 0.2 gave the waterbomb variants
+        12.0 and 12.2 (64 members), box.fold 43 and 77.
       shift_min: the first such shift, relative to the diagonal.
       max_linesearch_steps: halvings of the step before an iteration gives up.
       max_stalls: iterations in a row without a step before giving up (STALLED).
@@ -801,6 +848,8 @@ class Newton:
     free_turn: float = 1e-3
     convex_rate: float = 0.0
     shift_after: int = 4
+    buckling_ratio: float = 1.0
+    buckling_far: float = 0.1
     shift_min: float = 1e-6
     max_linesearch_steps: int = 40
     max_stalls: int = 12
@@ -944,7 +993,8 @@ class Newton:
 
     def _attempt(self, s: NewtonState, problem: Problem, exact: Array):
         """Step, limit, backtracking and expansion: (u, energy, accepted, full step taken,
-        the energy's rounding noise at the start, whether the exact Hessian was factored (see
+        the energy's rounding noise at the start, whether an exact attempt was made (``exact``
+        unless ``buckling_ratio`` skipped it), whether the exact Hessian was factored (see
         ``_factor``), whether the step was doubled).
 
         A step that turns the sheet is taken free of the gauge (see ``free_turn``): its
@@ -959,8 +1009,13 @@ class Newton:
         line search. ``a`` is dropped when ``2 |a| / |v| > acceleration``.
         """
         accelerate = self.acceleration > 0
-        solve, used = self._factor(s, problem, exact, keep=accelerate)
         x = positions(problem, s.u)
+        if self.buckling_ratio != float("inf"):
+            # far from equilibrium, no exact attempt where compressed bars would buckle the sheet
+            softening, support = _vertex_buckling(x, problem.structure, problem.params)
+            far = s.grad_max > self.buckling_far * s.grad_max0
+            exact = exact & ~(far & jnp.any(softening > self.buckling_ratio * support))
+        solve, used = self._factor(s, problem, exact, keep=accelerate)
         # gauged again: the Levenberg-Marquardt shift does not commute with the projectors, and
         # the line search below evaluates exactly the positions it keeps
         step, ok = solve(-gauge(problem, s.grad))
@@ -1035,7 +1090,7 @@ class Newton:
             alpha, value, _, _ = jax.lax.while_loop(grow, double, (alpha, value, True, 0))
         end = point(alpha)
         u = jnp.where(unpin, reframe(end, problem), end) - problem.start
-        return u, value, accepted, full, noise, used_exact, alpha > 1
+        return u, value, accepted, full, noise, exact, used_exact, alpha > 1
 
     def _acceleration(self, s: NewtonState, problem: Problem, x, velocity: Array, solve) -> Array:
         """``a = -H^-1 J^T W r''[v, v]`` at positions ``x`` (zero when too large or not
@@ -1050,10 +1105,12 @@ class Newton:
         # one step tried per iteration: a rejected exact attempt costs the iteration and the
         # next one is convex (but on the host an exact Hessian that does not factor hands over
         # within it: see ``_factor``)
-        u, value, accepted, full, noise, used_exact, expanded = self._attempt(s, problem, s.exact)
-        exact_ran = s.exact & used_exact
+        u, value, accepted, full, noise, tried, used_exact, expanded = self._attempt(
+            s, problem, s.exact
+        )
+        exact_ran = tried & used_exact
         retry = exact_ran & ~accepted  # rejected, and no convex step tried yet
-        rejected = retry | (s.exact & ~used_exact)
+        rejected = retry | (tried & ~used_exact)
         new_value, grad, gmax = _value_and_grad(u, problem, s.reference)
         finite = accepted & jnp.isfinite(new_value) & jnp.isfinite(gmax)
         take = finite
