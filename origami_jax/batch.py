@@ -27,7 +27,11 @@ Problems of one compiled shape run in a fixed number of **slots** (``chunk_size`
 compiled loop, every member stopping on its own tolerance. The problems wait in a queue on the
 devices; inside the loop, a few slots at a time, those whose problem has stopped write its
 result out and take the next problem of the queue (continuous batching: no slot waits for the
-slowest member of a chunk, nor for the host). With several devices the slots and the queue are
+slowest member of a chunk, nor for the host). The queue takes the problems that fold furthest
+first (:func:`_fold_extent`): slots of like problems waste less of each vmapped iteration, and
+the last problems to enter finish quickly. On 2026-12-06 (4 CPU devices, 6 alternating rounds)
+that order folded the benchmark's waterbomb set 1,698 folds/s against 1,393 in input order, the
+Miura-ori set 3,218 against 2,966 (medians). With several devices the slots and the queue are
 split across them (``jax.shard_map``). Each call runs about a tenth of a second of iterations;
 the next one is dispatched before the host reads the results of the last, shows progress and
 hands the finished problems on; an interrupted batch (Ctrl-C) returns the problems already
@@ -884,6 +888,15 @@ def _lane_shapes(solver: Solver, problem: Problem, axes, num_edges: int):
 _BLOCK_LAYOUTS: dict[tuple, HessianLayout] = {}
 
 
+def _fold_extent(member: _Member) -> float:
+    """The largest goal angle of a member's driven creases, ``|percent * target|`` (radians):
+    how far it folds, the order in which a group's problems enter the slots (iterations
+    follow it: correlation 0.95 on the benchmark's waterbomb and Miura-ori sets)."""
+    params = member.problem.params
+    goal = np.abs(np.asarray(params.percent) * np.asarray(params.target))
+    return float(np.max(goal, initial=0.0))
+
+
 def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_time, finish):
     """Solve problems of one compiled shape in ``size`` slots (padded to ``to``, or with
     ``shared`` topology unpadded), handing each finished problem to ``finish([(index,
@@ -931,7 +944,11 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
     rounds = int(np.clip(_QUEUE_BYTES // max(size * member_bytes, 1), 1, _QUEUE_PER_SLOT))
     q = size * (1 << (rounds.bit_length() - 1))  # a power of two times the slots
     qd = q // d
-    remaining = deque(group)
+    # the problems that fold furthest enter first: the slots then hold problems of like
+    # difficulty side by side (under vmap each iteration runs its slots' longest line search,
+    # and the curvature terms for any member's exact attempt), and the last ones to enter,
+    # whose slots see no refill, are quick
+    remaining = deque(sorted(group, key=_fold_extent, reverse=True))
     lanes = None
     init = jax.vmap(solver.init, in_axes=(axes,))
     per_step = None
