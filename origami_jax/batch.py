@@ -420,7 +420,8 @@ def fold_batch(
       iteration, where the member spends one (the same steps; so at an iteration or time
       limit the two can stop at different points). When interrupted (KeyboardInterrupt),
       the list holds the results of the problems already done and ``None`` for the rest,
-      with a warning.
+      with a warning; the problems that fold furthest are taken first (:func:`_fold_extent`),
+      so those are the ones done.
     """
     one_pattern = isinstance(patterns, CreasePattern)
     if one_pattern:
@@ -890,8 +891,9 @@ _BLOCK_LAYOUTS: dict[tuple, HessianLayout] = {}
 
 def _fold_extent(member: _Member) -> float:
     """The largest goal angle of a member's driven creases, ``|percent * target|`` (radians):
-    how far it folds, the order in which a group's problems enter the slots (iterations
-    follow it: correlation 0.95 on the benchmark's waterbomb and Miura-ori sets)."""
+    how far it folds from the flat sheet (a start is not counted), the order in which a group's
+    problems enter the slots (iterations follow it: correlation 0.95 on the benchmark's
+    waterbomb and Miura-ori sets)."""
     params = member.problem.params
     goal = np.abs(np.asarray(params.percent) * np.asarray(params.target))
     return float(np.max(goal, initial=0.0))

@@ -75,7 +75,8 @@ VARIANTS = [
 
 
 def test_shared_topology_equals_single_folds():
-    # two slots for three: the third enters a refilled slot (shared index arrays kept)
+    # two slots for three: one enters a refilled slot (the least folded, last: the queue takes
+    # the furthest first; shared index arrays kept)
     results = fold_batch(VARIANTS, share_topology=True, chunk_size=2, progress=False)
     for cp, r in zip(VARIANTS, results, strict=True):
         single = fold(cp)
@@ -269,8 +270,8 @@ def test_queue_in_rounds(monkeypatch):
 
 
 def test_finished_slots_take_the_next_problems():
-    # two slots for three problems of one bucket: the third enters a refilled slot, and
-    # every result equals a single fold (its history starting at its own entry)
+    # two slots for three problems of one bucket: one (the least folded) enters a refilled
+    # slot, and every result equals a single fold (its history starting at its own entry)
     results = fold_batch(MIURAS, chunk_size=2, progress=False)
     for cp, r in zip(MIURAS, results, strict=True):
         single = fold(cp)
@@ -334,7 +335,7 @@ SHARDED = textwrap.dedent(
     from origami_jax.batch import fold_batch
     assert len(jax.devices()) == 2, jax.devices()
     cps = [patterns.miura_ori(2, 2, fold_angle=a) for a in (0.5, 0.9, 1.3)]
-    # two slots (one per device) for three problems: the third enters a refilled slot
+    # two slots (one per device) for three problems: one enters a refilled slot
     two = fold_batch(cps, chunk_size=2, progress=False)
     one = fold_batch(cps, chunk_size=2, devices=jax.devices()[:1], progress=False)
     # one pattern, several parameter sets: shared index arrays, replicated on both devices

@@ -240,7 +240,8 @@ def test_vertex_buckling_is_the_compressed_bars_softening_against_the_hinges_sup
     l0 = np.asarray(params.rest_length)
     for x in xs:
         length = np.linalg.norm(x[bars[:, 1]] - x[bars[:, 0]], axis=1)
-        soft = np.maximum(l0 / length - 1, 0) / l0  # axial stiffness 1
+        eps = np.finfo(np.float64).eps  # compression up to 16 eps counts as none
+        soft = np.maximum(l0 / length - 1 - 16 * eps, 0) / l0  # axial stiffness 1
         expected = np.zeros(mesh.num_vertices)
         np.add.at(expected, bars[:, 0], soft)
         np.add.at(expected, bars[:, 1], soft)
@@ -254,13 +255,17 @@ def test_vertex_buckling_is_the_compressed_bars_softening_against_the_hinges_sup
         assert np.max(expected) > 0 and np.min(expected) == 0
         np.testing.assert_allclose(softening, expected, rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(got, support, rtol=1e-12)
-    batched = jax.vmap(_vertex_buckling, in_axes=(0, None, None))(
-        jnp.asarray(xs), structure, params
-    )
-    for i, x in enumerate(xs):
-        single = _vertex_buckling(jnp.asarray(x), structure, params)
-        np.testing.assert_allclose(batched[0][i], single[0], rtol=1e-12, atol=1e-15)
-        np.testing.assert_allclose(batched[1][i], single[1], rtol=1e-12)
+    # vmapped (batch innermost) with the parameters shared, and batched as fold_batch does
+    stiffer = params._replace(stiffness=params.stiffness._replace(crease=0.01))
+    both = jax.tree.map(lambda a, b: jnp.stack([a, b]), params, stiffer)
+    shared = jax.vmap(_vertex_buckling, in_axes=(0, None, None))(jnp.asarray(xs), structure, params)
+    each = jax.vmap(_vertex_buckling, in_axes=(0, None, 0))(jnp.asarray(xs), structure, both)
+    for i, (x, p) in enumerate(zip(xs, (params, stiffer), strict=True)):
+        for batched, q in ((shared, params), (each, p)):
+            single = _vertex_buckling(jnp.asarray(x), structure, q)
+            np.testing.assert_allclose(batched[0][i], single[0], rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(batched[1][i], single[1], rtol=1e-12)
+    assert np.max(np.abs(each[1][1] - shared[1][1])) > 0  # the stiffer creases counted
 
 
 def test_exact_attempts_are_skipped_where_compressed_bars_buckle_the_sheet():
@@ -292,6 +297,15 @@ def test_exact_attempts_are_skipped_where_compressed_bars_buckle_the_sheet():
     np.testing.assert_array_equal(skipped.u, convex.u)
     near = ask._replace(grad_max0=s.grad_max / (0.5 * checked.buckling_far))
     assert int(step(checked, near).failures) == 1
+    # on the host (sparse) path too: no exact factorization, the convex step, no failure
+    sparse = Newton(linear_solver="sparse")
+    host = prepare(sparse, dataclasses.replace(problem, aux=None), mesh)
+    host_step = jax.jit(lambda s: sparse.step(s, host))
+    skipped_host = host_step(ask)
+    assert int(skipped_host.failures) == 0
+    np.testing.assert_allclose(
+        skipped_host.u, host_step(s._replace(exact=jnp.asarray(False))).u, rtol=0, atol=1e-12
+    )
 
 
 def test_the_hand_over_takes_the_same_steps_as_an_iteration_spent():
