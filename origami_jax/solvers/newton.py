@@ -543,11 +543,9 @@ def _vertex_buckling(x: Array, structure: Structure, params) -> tuple[Array, Arr
     trailing = x.shape[2:]
     bars = structure.bars
     l0 = params.rest_length
-    d = x[bars[:, 1]] - x[bars[:, 0]]
-    length = jnp.sqrt(jnp.sum(d * d, axis=1))
     # compression at the level of rounding is none: a vertex without hinge support would
     # otherwise skip every exact attempt
-    strain = l0 / length - 1.0 - 16 * jnp.finfo(x.dtype).eps
+    strain = l0 / bar_lengths(x, bars) - 1.0 - 16 * jnp.finfo(x.dtype).eps
     soft = params.stiffness.axial / l0 * jnp.maximum(strain, 0.0)
     zeros = jnp.zeros((x.shape[0], *trailing), x.dtype)
     softening = zeros.at[bars[:, 0]].add(soft).at[bars[:, 1]].add(soft)
