@@ -261,22 +261,32 @@ def _reason(status: Status, m: dict, tol: float, iterations: int, x: np.ndarray,
     """Why the solve stopped; a solve that did not converge also names the worst collapsed
     triangle of its result (``x``), if any."""
     g = m["grad_norm_rel"]
-    note = collapse_note(x, mesh) if status != Status.CONVERGED else ""
-    return {
-        Status.CONVERGED: f"converged: grad_norm_rel {g:.2e} <= tol {tol:.1e}"
-        if g <= tol
-        else f"converged: grad_norm_rel {g:.2e} > tol {tol:.1e} is this dtype's rounding "
-        "floor for these stiffnesses (the gradient is noise there)",
-        Status.MAX_ITER: f"iteration limit {iterations} reached: grad_norm_rel {g:.2e} > "
-        f"tol {tol:.1e}",
-        Status.TIME_LIMIT: f"time limit reached after {iterations} iterations: grad_norm_rel "
-        f"{g:.2e} > tol {tol:.1e}",
-        Status.NONFINITE: "stopped: non-finite energy or gradient; the last finite iterate "
-        "is returned",
-        Status.STALLED: f"stalled at grad_norm_rel {g:.2e} > tol {tol:.1e}: the line search "
-        "finds no decrease (the rounding floor of this dtype, or a kink such as a collapsed "
-        "triangle)",
-    }[status] + (f"; {note}" if note else "")
+    # only the one message is formatted: fold_batch writes one per problem
+    if status == Status.CONVERGED:
+        if g <= tol:
+            return f"converged: grad_norm_rel {g:.2e} <= tol {tol:.1e}"
+        return (
+            f"converged: grad_norm_rel {g:.2e} > tol {tol:.1e} is this dtype's rounding "
+            "floor for these stiffnesses (the gradient is noise there)"
+        )
+    if status == Status.MAX_ITER:
+        text = f"iteration limit {iterations} reached: grad_norm_rel {g:.2e} > tol {tol:.1e}"
+    elif status == Status.TIME_LIMIT:
+        text = (
+            f"time limit reached after {iterations} iterations: grad_norm_rel {g:.2e} > "
+            f"tol {tol:.1e}"
+        )
+    elif status == Status.NONFINITE:
+        text = "stopped: non-finite energy or gradient; the last finite iterate is returned"
+    elif status == Status.STALLED:
+        text = (
+            f"stalled at grad_norm_rel {g:.2e} > tol {tol:.1e}: the line search finds no "
+            "decrease (the rounding floor of this dtype, or a kink such as a collapsed triangle)"
+        )
+    else:
+        raise ValueError(f"no reason for status {status!r}")
+    note = collapse_note(x, mesh)
+    return text + (f"; {note}" if note else "")
 
 
 def checked_start(pattern: CreasePattern, start, name: str = "start") -> np.ndarray | None:

@@ -410,3 +410,54 @@ def test_problems_of_one_topology_stack_as_made_one_by_one():
         np.testing.assert_array_equal(stacked.pinned[k], pinned)
         np.testing.assert_array_equal(stacked.projectors[k], projectors)
         np.testing.assert_array_equal(stacked.aux[k], lumped_mass(cp.mesh))
+
+
+@pytest.mark.parametrize("custom_start", [False, True])
+def test_variants_of_one_geometry_stack_as_made_one_by_one(custom_start):
+    # other fold angles of one crease pattern share its geometry: its gauges and step limits
+    # are computed once; a start of its own gives a problem its own gauge
+    cps = [patterns.miura_ori(3, 2, fold_angle=f) for f in (0.5, 1.0, 1.5)]
+    starts = [None] * 3
+    if custom_start:
+        starts[1] = cps[1].mesh.vertices + 0.05 * np.random.default_rng(4).standard_normal(
+            cps[1].mesh.vertices.shape
+        )
+    percents = [1.0, 0.5, 0.25]
+    members = batch_module._members(cps, percents, [None] * 3, starts, 1e-9)
+    assert all(m.group is members[0].group for m in members)
+    # as the queue stacks them: another order, one repeated (a free slot)
+    order = [2, 0, 1, 2]
+    stacked = batch_module._stacked_shared([members[k] for k in order], Newton(), None, np.float64)
+    for row, k in enumerate(order):
+        cp = cps[k]
+        start = cp.mesh.vertices if starts[k] is None else starts[k]
+        pinned, projectors = rigid_gauge(cp.mesh, start)
+        np.testing.assert_array_equal(stacked.pinned[row], pinned)
+        np.testing.assert_allclose(stacked.projectors[row], projectors, rtol=0, atol=1e-15)
+        np.testing.assert_array_equal(stacked.start[row], start)
+        assert stacked.max_step[row] == default_max_step(cp.mesh)
+        params = param_arrays(cp, percents[k], None)
+        np.testing.assert_array_equal(stacked.params.target[row], params.target)
+        np.testing.assert_array_equal(stacked.params.rest_length[row], params.rest_length)
+        assert stacked.params.percent[row] == params.percent
+        for name, n in (("axial", members[k].sizes.bars), ("crease", members[k].sizes.creases)):
+            expected = np.broadcast_to(getattr(params.stiffness, name), (n,))
+            np.testing.assert_array_equal(getattr(stacked.params.stiffness, name)[row], expected)
+        # the queue's order: how far each problem folds
+        goal = np.abs(percents[k] * params.target)
+        assert members[k].extent == np.max(goal)
+    # members made by two calls stack problem by problem, to the same arrays
+    again = batch_module._members(cps, percents, [None] * 3, starts, 1e-9)
+    mixed = [again[k] if row % 2 else members[k] for row, k in enumerate(order)]
+    assert mixed[0].group is not mixed[1].group
+    one_by_one = batch_module._stacked_shared(mixed, Newton(), None, np.float64)
+    for a, b in zip(jax.tree.leaves(stacked), jax.tree.leaves(one_by_one), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_fold_extents_of_per_crease_percents():
+    targets = np.array([[1.0, -2.0, 0.5], [0.3, 0.2, -0.1]])
+    per_crease = [np.array([1.0, 0.1, 1.0]), np.array([0.5, 1.0, 1.0])]
+    np.testing.assert_array_equal(batch_module._fold_extents(per_crease, targets), [1.0, 0.2])
+    np.testing.assert_array_equal(batch_module._fold_extents([0.5, -2.0], targets), [1.0, 0.6])
+    np.testing.assert_array_equal(batch_module._fold_extents([1.0], np.zeros((1, 0))), [0.0])
