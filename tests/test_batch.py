@@ -425,6 +425,8 @@ def test_variants_of_one_geometry_stack_as_made_one_by_one(custom_start):
     percents = [1.0, 0.5, 0.25]
     members = batch_module._members(cps, percents, [None] * 3, starts, 1e-9)
     assert all(m.group is members[0].group for m in members)
+    # computed once and broadcast (stride 0) only where every flat sheet and start is the same
+    assert (members[0].group.pinned.strides[0] == 0) == (not custom_start)
     # as the queue stacks them: another order, one repeated (a free slot)
     order = [2, 0, 1, 2]
     stacked = batch_module._stacked_shared([members[k] for k in order], Newton(), None, np.float64)
@@ -455,9 +457,7 @@ def test_variants_of_one_geometry_stack_as_made_one_by_one(custom_start):
         np.testing.assert_array_equal(a, b)
 
 
-def test_fold_extents_of_per_crease_percents():
+def test_fold_extents():
     targets = np.array([[1.0, -2.0, 0.5], [0.3, 0.2, -0.1]])
-    per_crease = [np.array([1.0, 0.1, 1.0]), np.array([0.5, 1.0, 1.0])]
-    np.testing.assert_array_equal(batch_module._fold_extents(per_crease, targets), [1.0, 0.2])
     np.testing.assert_array_equal(batch_module._fold_extents([0.5, -2.0], targets), [1.0, 0.6])
     np.testing.assert_array_equal(batch_module._fold_extents([1.0], np.zeros((1, 0))), [0.0])
