@@ -238,6 +238,18 @@ def test_interrupt_keeps_finished_problems(monkeypatch):
     assert results[2].converged
 
 
+def test_progress_shows_problems_done(monkeypatch, capsys):
+    # one slot, one iteration per call: the bar is redrawn after every call, counting the
+    # problems done of the batch's three
+    monkeypatch.setattr(batch_module, "next_chunk", lambda *args: 1)
+    results = fold_batch(MIURAS, chunk_size=1, devices=jax.devices()[:1], progress=True)
+    assert all(r.converged for r in results)
+    err = capsys.readouterr().err
+    counts = [int(line.split("/3 problems")[0].rsplit(" ", 1)[-1]) for line in err.split("\r")[1:]]
+    assert counts == sorted(counts) and counts[0] == 0 and counts[-1] == 3
+    assert {1, 2} <= set(counts) and err.endswith("\n")
+
+
 def test_iteration_and_time_limits_in_refilled_slots():
     one = dict(chunk_size=1, devices=jax.devices()[:1], progress=False)
     for r, cp in zip(fold_batch(MIURAS, max_iter=3, **one), MIURAS, strict=True):
