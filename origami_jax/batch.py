@@ -62,6 +62,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from origami_jax.energy import (
+    NO_BARRIERS,
+    Barriers,
     FoldParams,
     Stiffness,
     rest_lengths,
@@ -91,7 +93,7 @@ from origami_jax.solvers.base import (
 )
 from origami_jax.solvers.blocksparse import block_plan
 from origami_jax.solvers.dynamics import lumped_mass
-from origami_jax.solvers.newton import HessianLayout, layout_arrays
+from origami_jax.solvers.newton import HessianLayout, hessian_elements, layout_arrays
 
 __all__ = [
     "fold_batch",
@@ -113,7 +115,8 @@ SHARED_TOPOLOGY_MIN = 16
 
 class BatchSizes(NamedTuple):
     """The array sizes of a problem: vertices, bars, driven creases, facet creases, free
-    hinges and pinned vertices (the static shapes a compiled solve depends on)."""
+    hinges, pinned vertices and barrier triangles, and the barriers built (the static shapes
+    and settings a compiled solve depends on)."""
 
     vertices: int
     bars: int
@@ -121,6 +124,8 @@ class BatchSizes(NamedTuple):
     facets: int
     free: int
     pinned: int
+    triangles: int = 0
+    barriers: Barriers = NO_BARRIERS
 
 
 def _pow2(n: int) -> int:
@@ -144,6 +149,8 @@ def bucket(sizes: BatchSizes) -> BatchSizes:
         facets=max(_pow2(sizes.facets), vertices),
         free=_pow2(sizes.free),
         pinned=_pow2(sizes.pinned),
+        triangles=max(_pow2(sizes.triangles), 2 * vertices) if sizes.triangles else 0,
+        barriers=sizes.barriers,
     )
 
 
@@ -153,7 +160,14 @@ def problem_sizes(pattern: CreasePattern) -> BatchSizes:
     s = structure_arrays(mesh)
     pieces = len(rigid_gauge(mesh, mesh.vertices)[0])
     return BatchSizes(
-        mesh.num_vertices, len(s.bars), s.num_creases, s.num_facets, len(s.free), pieces
+        mesh.num_vertices,
+        len(s.bars),
+        s.num_creases,
+        s.num_facets,
+        len(s.free),
+        pieces,
+        len(s.triangles),
+        s.barriers,
     )
 
 
@@ -226,6 +240,10 @@ def _padded(member: _Member, to: BatchSizes, solver: Solver) -> Problem:
         hinge_bars=hinge_bars,
         free=_pad_rows(st.free, to.free, pad_hinge).astype(np.int32),
         free_bars=_pad_rows(st.free_bars, to.free, s.bars).astype(np.int32),
+        # a padded triangle lies on three padding vertices, its sides the padding bar (of zero
+        # stiffness: no barrier weight)
+        triangles=_pad_rows(st.triangles, to.triangles, pad_hinge[:3]).astype(np.int32),
+        triangle_bars=_pad_rows(st.triangle_bars, to.triangles, [s.bars] * 3).astype(np.int32),
         num_creases=to.creases,
     )
     k = _per_element(prm.stiffness, s)
@@ -261,8 +279,8 @@ def _padded(member: _Member, to: BatchSizes, solver: Solver) -> Problem:
 
 def _padded_aux(solver: Solver, member: _Member, problem: Problem, to: BatchSizes):
     if isinstance(solver, Newton):
-        st = problem.structure
-        return layout_arrays(np.asarray(st.bars), np.asarray(st.hinges), to.vertices, None)
+        elements = [np.asarray(e) for e in hessian_elements(problem.structure)]
+        return layout_arrays(elements, to.vertices, None)
     if isinstance(solver, Dynamics) and solver.mass != "unit":
         return _pad_rows(lumped_mass(member.pattern.mesh), to.vertices, 1.0)
     return None
@@ -315,6 +333,8 @@ def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
             structure.num_facets,
             len(structure.free),
             pinned.shape[1],
+            len(structure.triangles),
+            structure.barriers,
         )
         topology = _topology(structure, sizes)
         group = _Group(target, rest, start, pinned, projectors, steps)
@@ -346,7 +366,7 @@ def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
 def _topology(structure, sizes: BatchSizes) -> tuple:
     """What a compiled solve with shared index arrays needs equal: the structure's arrays."""
     st = structure
-    arrays = (st.bars, st.hinges, st.hinge_bars, st.free, st.free_bars)
+    arrays = (st.bars, st.hinges, st.hinge_bars, st.free, st.free_bars, st.triangles)
     return (sizes, *(np.asarray(a).tobytes() for a in arrays))
 
 
@@ -963,7 +983,7 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
         layout = _BLOCK_LAYOUTS.pop(key, None)
         if layout is None:
             st = first.problem.structure
-            elements = [np.asarray(st.bars)] + ([np.asarray(st.hinges)] if len(st.hinges) else [])
+            elements = [np.asarray(e) for e in hessian_elements(st)]
             layout = replace(
                 _padded_aux(solver, first, first.problem, to),
                 plan=block_plan(elements, to.vertices),
@@ -1120,5 +1140,6 @@ def _result(member, to, r, out, samples, max_iter, solver, dtype, wall, compile_
         wall_time=wall,
         compile_time=compile_time,
         history=history,
+        barriers=s.barriers,
         **metrics,
     )

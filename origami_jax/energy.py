@@ -5,7 +5,11 @@ Energy terms (lengths in the pattern's unit ``u``, angles in radians):
 * bar on every edge: ``axial / (2 l0) * (l - l0)**2``;
 * torsion on every driven crease: ``crease * l0 / 2 * (rho - percent * rho_target)**2``;
 * torsion on every facet crease (``F``, ``J`` and triangulation edges): ``facet * l0 / 2 * rho**2``
-  (the two torsion kinds share one vectorised kernel, creases first).
+  (the two torsion kinds share one vectorised kernel, creases first);
+* where a scene needs them (see :func:`needs_barriers`), the barriers of
+  :mod:`origami_jax.barrier`: on every torsion hinge, one that keeps the crease from folding
+  through itself (active only past ``pi``), and on every triangle, one that keeps it from
+  collapsing (active only below a quarter of its rest area). Inactive, they change nothing.
 
 All three stiffnesses are forces (energy per unit length), so their ratios are dimensionless and
 a pattern's folded shape does not depend on its scale. Defaults follow the seed's order
@@ -30,6 +34,7 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -40,6 +45,15 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from origami_jax.barrier import (
+    AREA_FLOOR,
+    HINGE_GAP,
+    area_barrier,
+    hinge_barrier,
+    rest_areas,
+    signed_areas,
+    triangle_normals,
+)
 from origami_jax.geometry import bar_lengths, fold_angles
 from origami_jax.pattern import CreasePattern, Mesh
 
@@ -47,6 +61,14 @@ __all__ = [
     "Stiffness",
     "Structure",
     "FoldParams",
+    "Reference",
+    "Barriers",
+    "needs_barriers",
+    "hinge_terms",
+    "triangle_terms",
+    "update_reference",
+    "barrier_distances",
+    "springs_only",
     "hinge_goals",
     "make_structure",
     "structure_arrays",
@@ -75,10 +97,27 @@ class Stiffness(NamedTuple):
     crease: float | Array = 0.001
 
 
+class Barriers(NamedTuple):
+    """Which barriers of :mod:`origami_jax.barrier` a scene has, and their sizes (static).
+
+    Attributes:
+      hinge_gap: how far past ``pi`` a crease's barrier reaches its wall (radians); 0: no
+        hinge barrier.
+      area_floor: the fraction of its rest area below which a triangle's barrier is active;
+        0: no area barrier.
+    """
+
+    hinge_gap: float = HINGE_GAP
+    area_floor: float = AREA_FLOOR
+
+
+NO_BARRIERS = Barriers(0.0, 0.0)
+
+
 @functools.partial(
     jax.tree_util.register_dataclass,
-    data_fields=["bars", "hinges", "hinge_bars", "free", "free_bars"],
-    meta_fields=["num_creases"],
+    data_fields=["bars", "hinges", "hinge_bars", "free", "free_bars", "triangles", "triangle_bars"],
+    meta_fields=["num_creases", "barriers"],
 )
 @dataclass(frozen=True)
 class Structure:
@@ -87,7 +126,8 @@ class Structure:
     ``bars`` (E, 2); ``hinges`` (H, 4) torsion hinges ``(i, j, k, l)``, the ``num_creases``
     driven creases first, then the facet creases; ``hinge_bars`` (H,) the bar of each hinge;
     ``free`` (Hu, 4) hinges without a spring and their ``free_bars``, kept only to report their
-    fold angles.
+    fold angles; ``triangles`` (T, 3) and their sides' bars ``triangle_bars`` (T, 3), only with
+    an area barrier (else (0, 3)); ``barriers`` the :class:`Barriers` built.
     """
 
     bars: Array
@@ -95,11 +135,29 @@ class Structure:
     hinge_bars: Array
     free: Array
     free_bars: Array
+    triangles: Array
+    triangle_bars: Array
     num_creases: int
+    barriers: Barriers = NO_BARRIERS
 
     @property
     def num_facets(self) -> int:
         return int(self.hinges.shape[0]) - self.num_creases
+
+
+class Reference(NamedTuple):
+    """What the energy measures the current state against (no effect on its value or
+    gradient at positions reachable from it without passing through a wall).
+
+    Attributes:
+      angles: (H,) each torsion hinge's unwrap reference: its fold angle is the branch nearest
+        it (see :func:`origami_jax.geometry.fold_angles`), radians.
+      normals: (T, 3) each barrier triangle's unit normal at the last accepted iterate: a
+        triangle turned over against it has a negative area ((0, 3) without area barrier).
+    """
+
+    angles: Array
+    normals: Array
 
 
 class FoldParams(NamedTuple):
@@ -119,23 +177,71 @@ class FoldParams(NamedTuple):
     stiffness: Stiffness
 
 
-def structure_arrays(mesh: Mesh) -> Structure:
+# a driven crease whose target reaches this far (radians) is folded nearly flat: such scenes get
+# the barriers by default (a fold that far can pass a crease through itself, or crush a triangle)
+FULL_FOLD = 0.9 * np.pi
+
+
+def needs_barriers(mesh: Mesh) -> bool:
+    """Whether a scene gets the barriers by default: a driven crease whose target is at least
+    :data:`FULL_FOLD` (0.9 pi). Rigid-foldable tessellations folded part way never come near
+    either wall, so they are built without them (no term, no array, no cost)."""
+    driven = mesh.edges_with_role("driven")
+    return bool(len(driven)) and bool(np.max(np.abs(mesh.target[driven])) >= FULL_FOLD)
+
+
+def _barriers(mesh: Mesh, barriers: Barriers | bool | None) -> Barriers:
+    if barriers is None:
+        barriers = needs_barriers(mesh)
+    if barriers is True:
+        return Barriers()
+    if barriers is False:
+        return NO_BARRIERS
+    if not isinstance(barriers, Barriers):
+        raise TypeError(f"barriers: expected None, a bool or Barriers, got {barriers!r}")
+    return barriers
+
+
+def triangle_bars(mesh: Mesh) -> np.ndarray:
+    """(T, 3) the bar of each triangle's sides ``(0, 1)``, ``(1, 2)``, ``(2, 0)``."""
+    e = np.sort(np.asarray(mesh.edges), axis=1)
+    v = mesh.num_vertices
+    keys = e[:, 0].astype(np.int64) * v + e[:, 1]
+    order = np.argsort(keys)
+    t = np.asarray(mesh.triangles)
+    sides = np.stack([t, np.roll(t, -1, axis=1)], axis=2)  # (T, 3, 2)
+    side_keys = sides.min(axis=2).astype(np.int64) * v + sides.max(axis=2)
+    return order[np.searchsorted(keys[order], side_keys)]
+
+
+def structure_arrays(mesh: Mesh, barriers: Barriers | bool | None = None) -> Structure:
     """The index arrays of :func:`make_structure` as NumPy arrays (host side, no device copy)."""
+    barriers = _barriers(mesh, barriers)
     driven, facet, free = (mesh.edges_with_role(r) for r in ("driven", "facet", "free"))
     torsion = np.concatenate([driven, facet])
+    if barriers.area_floor > 0:
+        triangles = np.asarray(mesh.triangles, np.int32).reshape(-1, 3)
+        sides = triangle_bars(mesh).astype(np.int32).reshape(-1, 3)
+    else:
+        triangles = sides = np.zeros((0, 3), np.int32)
     return Structure(
         bars=np.asarray(mesh.edges, np.int32),
         hinges=np.asarray(mesh.hinges[torsion].reshape(-1, 4), np.int32),
         hinge_bars=np.asarray(torsion, np.int32),
         free=np.asarray(mesh.hinges[free].reshape(-1, 4), np.int32),
         free_bars=np.asarray(free, np.int32),
+        triangles=triangles,
+        triangle_bars=sides,
         num_creases=len(driven),
+        barriers=barriers,
     )
 
 
-def make_structure(mesh: Mesh) -> Structure:
-    """Index arrays of the scene from a triangulated :class:`Mesh`."""
-    return jax.tree.map(jnp.asarray, structure_arrays(mesh))
+def make_structure(mesh: Mesh, barriers: Barriers | bool | None = None) -> Structure:
+    """Index arrays of the scene from a triangulated :class:`Mesh`; ``barriers``: ``None`` as
+    :func:`needs_barriers` says, ``True`` both at their defaults, ``False`` none, or a
+    :class:`Barriers`."""
+    return jax.tree.map(jnp.asarray, structure_arrays(mesh, barriers))
 
 
 def param_arrays(
@@ -196,53 +302,173 @@ def hinge_goals(structure: Structure, params: FoldParams) -> tuple[Array, Array]
     return jnp.concatenate(goals), jnp.concatenate(stiffness)
 
 
+def _reference(
+    x: Array, structure: Structure, params: FoldParams, reference: Reference | Array | None
+) -> Reference:
+    """A :class:`Reference` from ``reference`` (``None``: :func:`initial_reference` at ``x``;
+    an array: the hinges' angles, the triangles' normals those of ``x``)."""
+    if reference is None:  # the branches of initial_reference, without measuring twice
+        return Reference(_toward(structure, params), triangle_normals(x, structure.triangles))
+    if isinstance(reference, Reference):
+        return reference
+    return Reference(reference, triangle_normals(x, structure.triangles))
+
+
+def hinge_weights(structure: Structure, params: FoldParams) -> tuple[Array, Array]:
+    """(H,) goal angle of each torsion hinge and its weight ``stiffness * l0`` (the torsion
+    spring's energy is ``weight / 2 (rho - goal)^2``)."""
+    goal, stiffness = hinge_goals(structure, params)
+    return goal, stiffness * params.rest_length[structure.hinge_bars]
+
+
 def residuals(
-    x: Array, structure: Structure, params: FoldParams, reference: Array | None = None
+    x: Array, structure: Structure, params: FoldParams, reference: Reference | Array | None = None
 ) -> tuple[Array, Array]:
-    """The energy as weighted squares, ``energy = 1/2 sum(w r^2)``: (E + H,) residuals ``r``
-    (bar length minus rest length, then fold angle minus goal, radians) and their weights ``w``
-    (``axial / l0``, then ``stiffness * l0``). ``reference`` as in :func:`energy`."""
+    """The energy's residuals and its curvature in each: bar lengths minus rest lengths, then
+    fold angles minus goals (radians), then barrier triangles' area ratios; weights ``w`` the
+    energy's second derivative in each (``axial / l0``; ``stiffness * l0`` plus a hinge
+    barrier's; a triangle barrier's), evaluated at ``x``. Without barriers the energy is
+    exactly ``1/2 sum(w r^2)``; with them, ``w`` is what geodesic acceleration weighs each
+    residual's second-order change by. ``reference`` as in :func:`energy`."""
     l0 = params.rest_length
     r = [bar_lengths(x, structure.bars) - l0]
     w = [jnp.broadcast_to(params.stiffness.axial / l0, l0.shape)]
+    if structure.hinges.shape[0] or structure.triangles.shape[0]:
+        reference = _reference(x, structure, params, reference)
     if structure.hinges.shape[0]:
-        goal, stiffness = hinge_goals(structure, params)
-        if reference is None:
-            reference = 0.5 * goal
-        r.append(fold_angles(x, structure.hinges, reference) - goal)
-        w.append(stiffness * l0[structure.hinge_bars])
+        goal, weight = hinge_weights(structure, params)
+        rho = fold_angles(x, structure.hinges, reference.angles)
+        r.append(rho - goal)
+        gap = structure.barriers.hinge_gap
+        w.append(jax.lax.stop_gradient(hinge_terms(rho, structure, params)[2]) if gap else weight)
+    if structure.triangles.shape[0]:
+        ratio, _, _, d2 = triangle_terms(x, structure, params, reference.normals)
+        r.append(ratio)
+        w.append(jax.lax.stop_gradient(d2))
     return jnp.concatenate(r), jnp.concatenate(w)
 
 
+def hinge_terms(rho: Array, structure: Structure, params: FoldParams) -> tuple[Array, Array, Array]:
+    """Per torsion hinge: its energy (spring and, if built, barrier) and that energy's first and
+    second derivatives in the fold angle ``rho`` (radians). The barrier's weight is its bar's
+    ``axial * l0``, the scale of what can push a crease through itself (the sheet's bars),
+    whatever the crease's own stiffness."""
+    goal, weight = hinge_weights(structure, params)
+    diff = rho - goal
+    e, d1, d2 = 0.5 * weight * diff * diff, weight * diff, weight
+    gap = structure.barriers.hinge_gap
+    if gap > 0:
+        l0 = params.rest_length
+        axial = jnp.broadcast_to(params.stiffness.axial, l0.shape)
+        bars = structure.hinge_bars
+        b, b1, b2 = hinge_barrier(rho, (axial * l0)[bars], gap)
+        e, d1, d2 = e + b, d1 + b1, d2 + b2
+    return e, d1, d2
+
+
+def triangle_terms(
+    x: Array, structure: Structure, params: FoldParams, normals: Array
+) -> tuple[Array, Array, Array, Array]:
+    """Per barrier triangle: the area ratio ``A / A0`` (signed against ``normals``), the area
+    barrier's energy, and its first and second derivatives in that ratio."""
+    l0 = params.rest_length
+    sides = l0[structure.triangle_bars]  # (T, 3)
+    area0 = rest_areas(sides)
+    real = area0 > 0  # a padding triangle has no rest area (and no weight)
+    ratio = signed_areas(x, structure.triangles, normals) / jnp.where(real, area0, 1.0)
+    ratio = jnp.where(real, ratio, 1.0)
+    axial = jnp.broadcast_to(params.stiffness.axial, l0.shape)[structure.triangle_bars]
+    weight = jnp.mean(axial * sides, axis=1)
+    e, d1, d2 = area_barrier(ratio, weight, structure.barriers.area_floor)
+    return ratio, e, d1, d2
+
+
+def springs_only(structure: Structure) -> Structure:
+    """The structure without its barriers: the bars' and hinges' springs alone."""
+    none = structure.triangles[:0]
+    return dataclasses.replace(structure, barriers=NO_BARRIERS, triangles=none, triangle_bars=none)
+
+
 def energy(
-    x: Array, structure: Structure, params: FoldParams, reference: Array | None = None
+    x: Array, structure: Structure, params: FoldParams, reference: Reference | Array | None = None
 ) -> Array:
     """Total energy of positions ``x`` (V, 3); a scalar in energy units (force x length).
     With trailing batch axes (``x`` (V, 3, B), the parameters' arrays (n, B)), one per member.
 
-    ``reference`` (H,) unwraps each hinge's fold angle to the branch nearest it (see
-    :func:`origami_jax.geometry.fold_angles`); it changes no gradient. ``None`` uses the half-way
-    reference of :func:`initial_reference`, continuous on the whole way from flat to target.
+    ``reference``, a :class:`Reference`, unwraps each hinge's fold angle to the branch nearest
+    its angle (see :func:`origami_jax.geometry.fold_angles`) and signs each barrier triangle's
+    area against its normal; neither changes a gradient. ``None`` uses
+    :func:`initial_reference` of ``x``; an array is taken as the hinges' angles.
     """
-    r, w = residuals(x, structure, params, reference)
-    return 0.5 * jnp.sum(w * r * r, axis=0)
+    l0 = params.rest_length
+    stretch = bar_lengths(x, structure.bars) - l0
+    total = 0.5 * jnp.sum(params.stiffness.axial / l0 * stretch * stretch, axis=0)
+    if structure.hinges.shape[0] or structure.triangles.shape[0]:
+        reference = _reference(x, structure, params, reference)
+    if structure.hinges.shape[0]:
+        rho = fold_angles(x, structure.hinges, reference.angles)
+        total = total + jnp.sum(hinge_terms(rho, structure, params)[0], axis=0)
+    if structure.triangles.shape[0]:
+        total = total + jnp.sum(triangle_terms(x, structure, params, reference.normals)[1], axis=0)
+    return total
 
 
-def initial_reference(x: Array, structure: Structure, params: FoldParams) -> Array:
-    """(H,) unwrapped fold angles of ``x``, measured against half way to each goal: the branch
-    cut lies opposite, far from both flat and the target."""
-    goal, _ = hinge_goals(structure, params)
-    return fold_angles(x, structure.hinges, 0.5 * goal)
+def barrier_distances(
+    x: Array, structure: Structure, params: FoldParams, reference: Reference
+) -> Array:
+    """(H + T,) how far each barrier is from its wall, as a fraction of its active zone
+    (``pi + gap - |rho|`` over ``gap`` for the hinges, ``A / (A0 floor)`` for the triangles;
+    empty without barriers): what a solver's step limit keeps positive."""
+    out = []
+    gap = structure.barriers.hinge_gap
+    if gap > 0 and structure.hinges.shape[0]:
+        rho = fold_angles(x, structure.hinges, reference.angles)
+        out.append((gap - (jnp.abs(rho) - jnp.pi)) / gap)
+    if structure.triangles.shape[0]:
+        ratio = triangle_terms(x, structure, params, reference.normals)[0]
+        out.append(ratio / structure.barriers.area_floor)
+    if not out:
+        return jnp.zeros((0, *x.shape[2:]), x.dtype)
+    return jnp.concatenate(out)
+
+
+def initial_reference(x: Array, structure: Structure, params: FoldParams) -> Reference:
+    """The :class:`Reference` of a start ``x``: its fold angles measured against half way to
+    each goal (the branch cut lies opposite, far from both flat and the target: a start folded
+    through itself is seen as such, and brought back by the hinge barrier or the spring), and
+    the triangles' normals at ``x``."""
+    return Reference(
+        fold_angles(x, structure.hinges, _toward(structure, params)),
+        triangle_normals(x, structure.triangles),
+    )
+
+
+def _toward(structure: Structure, params: FoldParams) -> Array:
+    """(H,) what a start's fold angles are measured against (see :func:`initial_reference`)."""
+    return 0.5 * hinge_goals(structure, params)[0]
+
+
+def update_reference(x: Array, structure: Structure, reference: Reference) -> Reference:
+    """The :class:`Reference` at an accepted iterate ``x``, from the last one: each hinge's
+    angle followed continuously, each triangle's current normal."""
+    return Reference(
+        fold_angles(x, structure.hinges, reference.angles),
+        triangle_normals(x, structure.triangles),
+    )
 
 
 def build_energy(
-    pattern: CreasePattern, percent: float = 1.0, stiffness: Stiffness | dict | None = None
+    pattern: CreasePattern,
+    percent: float = 1.0,
+    stiffness: Stiffness | dict | None = None,
+    barriers: Barriers | bool | None = None,
 ) -> tuple[Callable[[Array, FoldParams], Array], FoldParams]:
-    """Close over a pattern's structure: returns ``(energy_fn(x, params), default_params)``."""
-    structure = make_structure(pattern.mesh)
+    """Close over a pattern's structure: returns ``(energy_fn(x, params), default_params)``
+    (``barriers`` as in :func:`make_structure`)."""
+    structure = make_structure(pattern.mesh, barriers)
     params = make_params(pattern, percent, stiffness)
 
-    def energy_fn(x: Array, params: FoldParams, reference: Array | None = None) -> Array:
+    def energy_fn(x: Array, params: FoldParams, reference: Reference | None = None) -> Array:
         return energy(jnp.asarray(x, params.rest_length.dtype), structure, params, reference)
 
     return energy_fn, params

@@ -8,14 +8,26 @@ another pattern of the same sizes, or the same pattern with other parameters, co
 
 from __future__ import annotations
 
+import functools
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from origami_jax.energy import FoldParams, Stiffness, make_params, make_structure
+from origami_jax.barrier import HINGE_GAP
+from origami_jax.energy import (
+    Barriers,
+    FoldParams,
+    Stiffness,
+    initial_reference,
+    make_params,
+    make_structure,
+    needs_barriers,
+)
+from origami_jax.intersections import INTERSECTION_DEPTH, intersecting_pairs
 from origami_jax.metrics import (
     METRIC_NAMES,
     collapse_note,
@@ -90,18 +102,32 @@ class FoldResult:
     grad_norm_rel: float
     shape_error: float | None = None
     history: dict[str, np.ndarray] = field(default_factory=dict)
+    path: str = "direct"
+    barriers: Barriers = field(default_factory=lambda: Barriers(0.0, 0.0))
+    frames: list = field(default_factory=list)
 
     @property
     def through_pi(self) -> np.ndarray:
-        """Mesh edges whose crease folded through itself (unwrapped ``|angle| > pi``): the paper
+        """Mesh edges whose crease folded through itself (unwrapped ``|angle|`` more than
+        :data:`~origami_jax.barrier.HINGE_GAP`, 1e-5 rad, past ``pi``: a crease held at its
+        barrier, or a fully folded one within the solver's tolerance, is not through): the paper
         passed through the paper there. Empty for a physical result."""
-        return np.flatnonzero(np.abs(self.fold_angles) > np.pi + 1e-9)
+        return np.flatnonzero(np.abs(self.fold_angles) > np.pi + HINGE_GAP)
 
     @property
     def collapsed(self) -> np.ndarray:
         """Mesh triangles squeezed below 1e-6 of their flat area, the smallest first (see
         :func:`~origami_jax.metrics.collapsed_triangles`). Empty for a physical result."""
         return collapsed_triangles(self.positions, self.pattern.mesh)[0]
+
+    @property
+    def intersections(self) -> np.ndarray:
+        """(K, 2) pairs of mesh triangles sharing no vertex that cross each other deeper than
+        1e-6 of the diameter (see :func:`~origami_jax.intersections.intersecting_pairs`): the
+        paper passed through the paper. Empty for a physical result."""
+        return intersecting_pairs(
+            self.positions, self.pattern.mesh.triangles, INTERSECTION_DEPTH * self.pattern.diameter
+        )
 
     @property
     def metrics(self) -> dict[str, float]:
@@ -138,10 +164,12 @@ class FoldResult:
         flagged = (
             ("folded through pi", "edges", self.through_pi),
             ("collapsed", "triangles", self.collapsed),
+            ("intersecting", "triangle pairs", self.intersections),
         )
         for label, kind, found in flagged:
             if len(found):
-                shown = ", ".join(str(k) for k in found[:8]) + (" ..." if len(found) > 8 else "")
+                shown = ", ".join("-".join(map(str, np.atleast_1d(k))) for k in found[:8])
+                shown += " ..." if len(found) > 8 else ""
                 rows.append((label, f"{len(found)} {kind}: {shown}"))
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
@@ -221,17 +249,31 @@ def next_chunk(chunk: int, seconds: float, steps: int) -> int:
 FIRST_ITERATION_COST = 20.0
 
 
-def drive(solver, start, advance, problem, max_iter: int, max_time, record_every, on_chunk=None):
+def drive(
+    solver,
+    start,
+    advance,
+    problem,
+    max_iter: int,
+    max_time,
+    record_every,
+    on_chunk=None,
+    retol=None,
+):
     """The host loop of a solve: compiled chunks of iterations until no problem is RUNNING, the
     iteration limit or ``max_time``. Chunks grow (up to 64x at a time) to about a tenth of a second
     (or stay at ``record_every``); a sample of the metrics is kept after each. Works for one
-    problem and for a batch (statuses and metrics then have a leading batch axis).
+    problem and for a batch (statuses and metrics then have a leading batch axis). ``retol``:
+    ``retol(state, problem) -> problem``, applied once the start state is known (a continuation
+    sets each step's tolerance from its start gradient).
 
     Returns ``(state, metrics, positions, angles, samples, out_of_time)``.
     """
     t0 = time.perf_counter()
     state, m, x, angles = jax.block_until_ready(start(problem))
     check_start(solver, state)
+    if retol is not None:
+        problem = retol(state, problem)
     samples = [_sample(state, m, 0.0)]
     # a small problem's whole solve fits one chunk: a round trip costs it more than iterations
     guess = FIRST_ITERATION_COST * (time.perf_counter() - t0)
@@ -322,6 +364,8 @@ def fold(
     params: FoldParams | None = None,
     max_time: float | None = None,
     record_every: int | None = None,
+    barriers: Barriers | bool | None = None,
+    path: str = "auto",
 ) -> FoldResult:
     """Fold ``pattern`` to equilibrium from flat (or from ``start``).
 
@@ -380,23 +424,55 @@ def fold(
     else:
         params = jax.tree.map(lambda a: jnp.asarray(a, dtype), params)
         percent = float(params.percent)
-    problem = make_problem(mesh, make_structure(mesh), params, start, tol)
-    problem = prepare(solver_obj, problem, mesh)
-
-    (start, advance), compile_time = compiled(solver_obj, problem, mesh.num_edges)
-    t0 = time.perf_counter()
+    if path not in ("auto", "direct", "continuation"):
+        raise ValueError(f"path must be 'auto', 'direct' or 'continuation', got {path!r}")
+    structure = make_structure(mesh, barriers)
+    if path == "auto":
+        # a given start (or a folded form's own) is where the user wants the solve to begin;
+        # the first-order solvers' iterations are many already (dynamics has its own ramp)
+        follows = getattr(solver_obj, "follows_path", False)
+        flat = start is None or is_planar(start)
+        path = "continuation" if follows and flat and needs_continuation(mesh) else "direct"
     bar = ProgressBar(max_iter) if progress else None
 
     def on_chunk(iterations, sample):
         if bar is not None:
             bar.update(iterations, f"err {float(sample['fold_angle_error_max']):.2e} rad")
 
-    state, m, x, angles, samples, out_of_time = drive(
-        solver_obj, start, advance, problem, max_iter, max_time, record_every, on_chunk
-    )
-    iterations = int(state.iteration)
-    x, angles = jax.device_get((x, angles))
-    wall_time = time.perf_counter() - t0
+    if path == "continuation":
+        solved = _solve_path(
+            solver_obj,
+            mesh,
+            structure,
+            params,
+            start,
+            tol,
+            max_iter,
+            max_time,
+            record_every,
+            on_chunk,
+        )
+    else:
+        problem = prepare(solver_obj, make_problem(mesh, structure, params, start, tol), mesh)
+        (start_c, advance_c), compile_time = compiled(solver_obj, problem, mesh.num_edges)
+        t0 = time.perf_counter()
+        state, m, x, angles, samples, out_of_time = drive(
+            solver_obj, start_c, advance_c, problem, max_iter, max_time, record_every, on_chunk
+        )
+        x, angles = jax.device_get((x, angles))
+        solved = _Solved(
+            state,
+            m,
+            x,
+            angles,
+            samples,
+            out_of_time,
+            int(state.iteration),
+            compile_time,
+            time.perf_counter() - t0,
+            [],
+        )
+    state, m, x, angles, samples, out_of_time, iterations, compile_time, wall_time, frames = solved
     if bar is not None:
         bar.close()
 
@@ -416,7 +492,7 @@ def fold(
         converged=status == Status.CONVERGED,
         status=status,
         reason=_reason(status, m, tol, iterations, x, pattern.mesh),
-        iterations=int(state.iteration),
+        iterations=iterations,
         solver=solver_obj.name,
         percent=float(percent),
         dtype=dtype.name,
@@ -424,7 +500,180 @@ def fold(
         compile_time=compile_time,
         shape_error=shape_err,
         history=history,
+        path=path,
+        barriers=structure.barriers,
+        frames=frames,
         **{k: m[k] for k in METRIC_NAMES},
+    )
+
+
+class _Solved(NamedTuple):
+    """What a solve hands back to :func:`fold` (host values but the state)."""
+
+    state: object
+    metrics: dict
+    positions: np.ndarray
+    angles: np.ndarray
+    samples: list
+    out_of_time: bool
+    iterations: int
+    compile_time: float
+    wall_time: float
+    frames: list
+
+
+class Frame(NamedTuple):
+    """One state of a fold's path: its fold percent (a fraction), positions (V, 3) and per-edge
+    fold angles (E,) (radians, unwrapped)."""
+
+    percent: float
+    positions: np.ndarray
+    fold_angles: np.ndarray
+
+
+# continuation in fold percent: the first step and the largest (fractions of the way), the
+# smallest before a step is taken whatever it does, the fold-angle change (radians) beyond which
+# a step counts as a jump to another branch, the intermediate steps' tolerance and iterations
+PATH_FIRST_STEP = 0.125
+PATH_MAX_STEP = 0.25
+PATH_MIN_STEP = 1.0 / 512
+PATH_JUMP = 1.0
+PATH_TOL = 1e-6
+PATH_STEP_ITERATIONS = 200
+PATH_EASY_ITERATIONS = 20
+PATH_SOFT_AXIAL = 30.0
+PATH_END = 2.0
+_DEBUG = __import__("os").environ.get("OJ_DEBUG")
+
+
+def _shifted(on_chunk, offset: int, iterations: int, sample: dict) -> None:
+    on_chunk(offset + iterations, sample)
+
+
+def is_planar(x: np.ndarray) -> bool:
+    """Whether positions ``x`` (V, 3) lie in one plane, to 1e-9 of their extent: a flat sheet
+    however it is placed (a FOLD file drawn in the x-z plane, say)."""
+    centred = x - x.mean(axis=0)
+    extent = float(np.max(np.linalg.norm(centred, axis=1), initial=0.0))
+    if extent == 0.0:
+        return True
+    return float(np.linalg.svd(centred, compute_uv=False)[-1]) <= 1e-9 * extent * np.sqrt(len(x))
+
+
+def needs_continuation(mesh) -> bool:
+    """Whether :func:`fold` follows the path from flat by default: where the scene gets the
+    barriers (a crease driven to a full fold, see :func:`~origami_jax.energy.needs_barriers`)."""
+    return needs_barriers(mesh)
+
+
+def _solve_path(
+    solver, mesh, structure, params, start, tol, max_iter, max_time, record_every, on_chunk
+) -> _Solved:
+    """Fold along the physical path: the fold percent raised from 0 in steps, each solve
+    started from the last one's state (positions and reference), as paper is folded and as
+    Origami Simulator's percent slider does. A step that does not converge, or in which some
+    crease turns by more than :data:`PATH_JUMP` (a jump to another branch), is retried at half
+    the size; a converged step lets the next grow. The tolerance is relative to the gradient
+    at the start fully driven, like a direct solve's."""
+    dtype = params.rest_length.dtype
+    full = params.percent
+    x = np.asarray(mesh.vertices if start is None else start, np.float64)
+    reference = initial_reference(jnp.asarray(x, dtype), structure, params)
+
+    k = params.stiffness
+    crease = jnp.mean(k.crease)
+    soft_axial = jnp.minimum(1.0, PATH_SOFT_AXIAL * crease / jnp.mean(k.axial))
+    soft_facet = jnp.minimum(1.0, crease / jnp.mean(k.facet))
+
+    def problem_at(t, x, reference):
+        # t in [0, 1]: the fold percent raised at soft stiffness; t in [1, 2]: the stiffness
+        # raised to the user's at full percent
+        soft = max(0.0, 1.0 - max(t - 1.0, 0.0))
+        stiffness = k._replace(axial=k.axial * soft_axial**soft, facet=k.facet * soft_facet**soft)
+        at = params._replace(percent=jnp.asarray(full * min(t, 1.0), dtype), stiffness=stiffness)
+        problem = make_problem(mesh, structure, at, x, tol, reference=reference)
+        return prepare(solver, problem, mesh)
+
+    problem = problem_at(1.0, x, reference)
+    (start_c, advance_c), compile_time = compiled(solver, problem, mesh.num_edges)
+    t0 = time.perf_counter()
+    first, m, _, angles = jax.device_get(start_c(problem))
+    grad_ref = float(first.grad_max0)
+    frames = [Frame(0.0, x, np.asarray(angles, np.float64))]
+    samples = [_sample(first, m, 0.0)]  # the start, fully driven, as a direct solve's
+    done, step, iterations, calm = 0.0, PATH_FIRST_STEP, 0, True
+    while True:
+        fraction = min(PATH_END, done + step)
+        last = fraction >= PATH_END
+
+        def retol(state, problem, last=last):
+            g0 = float(state.grad_max0)
+            goal = (tol if last else max(tol, PATH_TOL)) * grad_ref
+            return replace(problem, tol=jnp.asarray(goal / g0 if g0 > 0 else tol, dtype))
+
+        spent = time.perf_counter() - t0
+        budget = max_iter - iterations if last else min(PATH_STEP_ITERATIONS, max_iter - iterations)
+        state, m, xk, angles_k, chunk, out_of_time = drive(
+            solver,
+            start_c,
+            advance_c,
+            problem_at(fraction, x, reference),
+            budget,
+            None if max_time is None else max(max_time - spent, 0.0),
+            record_every,
+            None if on_chunk is None else functools.partial(_shifted, on_chunk, iterations),
+            retol=retol,
+        )
+        xk, angles_k = jax.device_get((xk, angles_k))
+        steps = int(state.iteration)
+        for sample in chunk[1:]:  # each step's start is the last one's end
+            samples.append(
+                {
+                    **sample,
+                    "iteration": iterations + sample["iteration"],
+                    "wall_time": spent + sample["wall_time"],
+                    "grad_norm_rel": sample["grad_norm_rel"] * float(state.grad_max0) / grad_ref,
+                }
+            )
+        iterations += steps
+        converged = int(state.status) == Status.CONVERGED
+        jump = float(np.max(np.abs(angles_k - frames[-1].fold_angles), initial=0.0))
+        spent_all = out_of_time or iterations >= max_iter
+        if _DEBUG:
+            print(
+                f"t={fraction:.4f} step={step:.4f} it={steps} status={int(state.status)} "
+                f"jump={jump:.3f} g={float(state.grad_max):.2e}/{float(state.grad_max0):.2e}"
+            )
+        if (converged and jump <= PATH_JUMP) or step <= PATH_MIN_STEP or spent_all:
+            x = np.asarray(xk, np.float64)
+            reference = state.reference
+            done = fraction
+            frames.append(
+                Frame(float(full) * min(fraction, 1.0), x, np.asarray(angles_k, np.float64))
+            )
+            if last or spent_all:
+                break
+            # grow only after two easy steps in a row: a step just halved would fail again
+            easy = converged and jump <= 0.5 * PATH_JUMP and steps <= PATH_EASY_ITERATIONS
+            if easy and calm:
+                step = min(PATH_MAX_STEP, 2.0 * step)
+            calm = easy
+        else:
+            step *= 0.5
+            calm = False
+    m = dict(m)
+    m["grad_norm_rel"] = float(state.grad_max) / grad_ref if grad_ref > 0 else 0.0
+    return _Solved(
+        state,
+        m,
+        x,
+        np.asarray(angles_k, np.float64),
+        samples,
+        out_of_time,
+        iterations,
+        compile_time,
+        time.perf_counter() - t0,
+        frames,
     )
 
 

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from origami_jax.energy import FoldParams, Structure, energy, hinge_goals
+from origami_jax.energy import FoldParams, Reference, Structure, energy, hinge_goals
 from origami_jax.geometry import bar_lengths, fold_angles
 from origami_jax.pattern import Mesh, triangle_quality
 from origami_jax.solvers.base import COLLAPSED_AREA, doubled_areas
@@ -44,7 +44,9 @@ METRIC_NAMES = (
 )
 
 
-def position_metrics(x: Array, s: Structure, p: FoldParams, reference: Array) -> dict[str, Array]:
+def position_metrics(
+    x: Array, s: Structure, p: FoldParams, reference: Reference
+) -> dict[str, Array]:
     """The metrics of metrics.md that depend on positions only (radians, dimensionless, energy)."""
     zero = jnp.zeros((), x.dtype)
     strain = jnp.abs(bar_lengths(x, s.bars) / p.rest_length - 1.0)
@@ -53,7 +55,7 @@ def position_metrics(x: Array, s: Structure, p: FoldParams, reference: Array) ->
     out["facet_angle_error_max"] = zero
     if s.hinges.shape[0]:
         goal, _ = hinge_goals(s, p)
-        err = jnp.abs(fold_angles(x, s.hinges, reference) - goal)
+        err = jnp.abs(fold_angles(x, s.hinges, reference.angles) - goal)
         if s.num_creases:
             out["fold_angle_error_max"] = jnp.max(err[: s.num_creases])
             out["fold_angle_error_mean"] = jnp.mean(err[: s.num_creases])
@@ -63,11 +65,11 @@ def position_metrics(x: Array, s: Structure, p: FoldParams, reference: Array) ->
     return out
 
 
-def edge_fold_angles(x: Array, s: Structure, reference: Array, num_edges: int) -> Array:
+def edge_fold_angles(x: Array, s: Structure, reference: Reference, num_edges: int) -> Array:
     """(E,) fold angle of every mesh edge (radians; 0 on borders), unwrapped where tracked."""
     out = jnp.zeros(num_edges, x.dtype)
     if s.hinges.shape[0]:
-        out = out.at[s.hinge_bars].set(fold_angles(x, s.hinges, reference))
+        out = out.at[s.hinge_bars].set(fold_angles(x, s.hinges, reference.angles))
     if s.free.shape[0]:
         out = out.at[s.free_bars].set(fold_angles(x, s.free))
     return out

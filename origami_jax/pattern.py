@@ -384,7 +384,20 @@ def _check_edge_geometry(vertices: np.ndarray, edges: np.ndarray) -> None:
     short = np.flatnonzero(lengths <= 1e-12 * scale)
     if len(short):
         k = int(short[0])
-        raise PatternError(f"{_edge_name(k, edges[k])}: has zero length")
+        name = _edge_name(k, edges[k])
+        if lengths[k] == 0.0:
+            raise PatternError(f"{name}: has zero length")
+        what = f"{name}: is {lengths[k]:.3g} long, under 1e-12 of the longest edge ({scale:.3g})"
+        # not zero: its ends nearly coincide, or a vertex far out makes the pattern that large
+        r = np.linalg.norm(vertices - np.median(vertices, axis=0), axis=1)
+        far = int(np.argmax(r))
+        if r[far] <= 1e6 * float(np.median(r)):
+            raise PatternError(f"{what}: its two vertices nearly coincide")
+        where = ", ".join(f"{x:.6g}" for x in vertices[far])
+        raise PatternError(
+            f"{what}: vertex {far} at ({where}) lies that far from the others; is its "
+            "coordinate a mistake?"
+        )
 
 
 def _check_face_edges(edges, faces, edge_faces, assignments) -> None:
@@ -414,6 +427,8 @@ def _check_face_edges(edges, faces, edge_faces, assignments) -> None:
 
 def signed_area(points: np.ndarray) -> float:
     """Signed area of a polygon (N, 2), positive when counterclockwise."""
+    # relative to its first vertex: a small face far from the origin keeps its digits
+    points = points[:, :2] - points[:1, :2]
     x, y = points[:, 0], points[:, 1]
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 

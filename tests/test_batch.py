@@ -38,7 +38,7 @@ SEED = patterns.seed_waterbomb()
 def batch_and_singles():
     cps = [MIURAS[0], SEED, MIURAS[1], MIURAS[2]]
     results = fold_batch(cps, chunk_size=2, progress=False)
-    singles = [fold(cp) for cp in cps]
+    singles = [fold(cp, path="direct") for cp in cps]
     return cps, results, singles
 
 
@@ -61,7 +61,7 @@ def test_one_pattern_many_parameter_sets():
     results = fold_batch(MIURAS[1], percent=percents, progress=False)
     assert [r.percent for r in results] == percents
     for p, r in zip(percents, results, strict=True):
-        single = fold(MIURAS[1], percent=p)
+        single = fold(MIURAS[1], percent=p, path="direct")
         assert r.converged
         assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * MIURAS[1].diameter
     assert results[0].energy != pytest.approx(results[1].energy, rel=1e-3)
@@ -79,7 +79,7 @@ def test_shared_topology_equals_single_folds():
     # the furthest first; shared index arrays kept)
     results = fold_batch(VARIANTS, share_topology=True, chunk_size=2, progress=False)
     for cp, r in zip(VARIANTS, results, strict=True):
-        single = fold(cp)
+        single = fold(cp, path="direct")
         assert r.pattern is cp and r.converged and single.converged
         assert r.iterations == single.iterations
         assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
@@ -96,7 +96,7 @@ def test_first_order_solvers_batched_equal_single_folds(solver, share):
     cps = VARIANTS if share else MIURAS
     results = fold_batch(cps, solver=solver, share_topology=share, chunk_size=2, progress=False)
     for cp, r in zip(cps, results, strict=True):
-        single = fold(cp, solver=solver)
+        single = fold(cp, solver=solver, path="direct")
         assert r.pattern is cp and r.converged and single.converged
         assert r.solver == single.solver == solver
         assert r.grad_norm_rel <= 1e-10
@@ -193,7 +193,10 @@ def test_padded_solve_equals_unpadded_bucket():
 def test_buckets_are_powers_of_two_with_room():
     sizes = problem_sizes(MIURAS[0])
     to = bucket(sizes)
-    for real, padded in zip(sizes, to, strict=True):
+    counts = BatchSizes._fields[:-1]  # every count; the last field names the barriers
+    for real, padded in zip(
+        [getattr(sizes, f) for f in counts], [getattr(to, f) for f in counts], strict=True
+    ):
         assert padded >= real and (padded == 0 or padded & (padded - 1) == 0)
     assert to.vertices >= sizes.vertices + 4 and to.bars > sizes.bars
 
@@ -253,7 +256,7 @@ def test_progress_shows_problems_done(monkeypatch, capsys):
 def test_iteration_and_time_limits_in_refilled_slots():
     one = dict(chunk_size=1, devices=jax.devices()[:1], progress=False)
     for r, cp in zip(fold_batch(MIURAS, max_iter=3, **one), MIURAS, strict=True):
-        single = fold(cp, max_iter=3)
+        single = fold(cp, max_iter=3, path="direct")
         assert r.status == Status.MAX_ITER and r.iterations == 3 == single.iterations
         assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
     assert [r.iterations for r in fold_batch(MIURAS, max_iter=0, **one)] == [0, 0, 0]
@@ -270,7 +273,7 @@ def test_queue_in_rounds(monkeypatch):
     monkeypatch.setattr(batch_module, "_OUTBOX_PER_SLOT", 1)
     one = dict(chunk_size=1, devices=jax.devices()[:1], progress=False)
     for cp, r in zip(MIURAS, fold_batch(MIURAS, **one), strict=True):
-        single = fold(cp)
+        single = fold(cp, path="direct")
         assert r.pattern is cp and r.converged and r.iterations == single.iterations
         assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
         assert r.history["iteration"][-1] == r.iterations and r.wall_time > 0
@@ -286,7 +289,7 @@ def test_finished_slots_take_the_next_problems():
     # slot, and every result equals a single fold (its history starting at its own entry)
     results = fold_batch(MIURAS, chunk_size=2, progress=False)
     for cp, r in zip(MIURAS, results, strict=True):
-        single = fold(cp)
+        single = fold(cp, path="direct")
         assert r.converged and r.iterations == single.iterations
         assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
         assert r.history["wall_time"][0] == 0.0 and r.history["iteration"][0] == 0
@@ -394,7 +397,7 @@ def test_shared_topology_stacks_scalar_and_per_element_stiffness():
     stiffness = [None, {"axial": per_bar}]
     results = fold_batch(cp, stiffness=stiffness, progress=False)
     for k, r in zip(stiffness, results, strict=True):
-        single = fold(cp, stiffness=k)
+        single = fold(cp, stiffness=k, path="direct")
         assert r.converged and single.converged
         assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
     assert results[0].energy != pytest.approx(results[1].energy, rel=1e-6)

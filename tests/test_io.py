@@ -6,6 +6,7 @@ import copy
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,7 +14,7 @@ import meshio
 import numpy as np
 import pytest
 
-from origami_jax import CreasePattern, PatternError
+from origami_jax import CreasePattern, PatternError, PatternWarning
 from origami_jax.io import fold as fold_module
 from origami_jax.io import (
     from_fold_dict,
@@ -494,6 +495,11 @@ MALFORMED = [
     (_set(["vertices_coords", 2], [1, float("nan")]), "vertices_coords[2][1]: expected a finite"),
     (_set(["vertices_coords", 2], [10**400, 1]), "vertices_coords[2][0]: expected a finite"),
     (_set(["vertices_coords", 2], [1, 0]), "edge 1 (vertices 1, 2): has zero length"),
+    (
+        _set(["vertices_coords", 2], [1e20, 1]),
+        "edge 0 (vertices 0, 1): is 1 long, under 1e-12 of the longest edge (1e+20): vertex 2 "
+        "at (1e+20, 1, 0) lies that far from the others; is its coordinate a mistake?",
+    ),
     (_set(["edges_vertices"], {"a": 1}), "edges_vertices: expected an array"),
     (_set(["edges_vertices", 4], [0]), "edges_vertices[4]: expected 2 vertex indices"),
     (_set(["edges_vertices", 4], 0), "edges_vertices[4]: expected an array of vertex indices"),
@@ -565,6 +571,69 @@ MALFORMED_FRAMES = [
     ),
     ([{"vertices_coords": [[0, 0]]}], "frame 1 (file_frames[0]): the frame has neither"),
 ]
+
+
+def test_overlapping_edges_with_different_assignments_are_an_error_without_faces():
+    """FOLD coordinates are exact: edges that overlap with different letters contradict each
+    other (the SVG reader, whose drawings are not exact, applies Origami Simulator's rule)."""
+    data = {
+        "file_spec": 1.2,
+        "vertices_coords": [[0, 0], [2, 0], [2, 2], [0, 2], [1, 1]],
+        "edges_vertices": [[0, 1], [1, 2], [2, 3], [3, 0], [0, 2], [0, 4]],
+        "edges_assignment": ["B", "B", "B", "B", "V", "M"],
+    }
+    with pytest.raises(PatternError) as info:
+        from_fold_dict(data)
+    assert "edges_vertices[4] and edges_vertices[5]: overlap with different assignments" in str(
+        info.value
+    )
+
+
+def test_far_vertex_without_faces_is_named():
+    data = {
+        "file_spec": 1.2,
+        "vertices_coords": [[0, 0], [1, 0], [1, 1], [0, 1], [1e20, 0]],
+        "edges_vertices": [[0, 1], [1, 2], [2, 3], [3, 0], [1, 4], [4, 2]],
+        "edges_assignment": ["B", "M", "B", "B", "B", "B"],
+    }
+    with pytest.raises(PatternError) as info:
+        from_fold_dict(data)
+    assert str(info.value).startswith(
+        "edges_vertices[5]: its point (1e+20, 0) spreads the lines over 1e+20, so 4 of the 6 "
+        "lines are shorter than the merge tolerance"
+    )
+
+
+def test_slit_loads_as_a_free_hinge_with_a_warning():
+    """A cut with both ends inside the paper and no other cut at them cannot open: loaded as
+    Origami Simulator loads it, a free hinge (U, angle 0), with a warning naming the edge."""
+    data = {
+        "file_spec": 1.2,
+        "vertices_coords": [[0, 0], [1, 0], [1, 1], [0, 1], [0, 0.5], [0.3, 0.5], [0.7, 0.5]]
+        + [[1, 0.5]],
+        "edges_vertices": [[0, 1], [1, 7], [7, 2], [2, 3], [3, 4], [4, 0], [4, 5], [5, 6]]
+        + [[6, 7]],
+        "edges_assignment": ["B"] * 6 + ["M", "C", "M"],
+        "edges_foldAngle": [0] * 6 + [-90, 0, -90],
+        "faces_vertices": [[0, 1, 7, 6, 5, 4], [4, 5, 6, 7, 2, 3]],
+    }
+    with pytest.warns(PatternWarning) as record:
+        cp = from_fold_dict(data)
+    assert cp.assignments[7] == "U" and cp.fold_angles[7] == 0.0
+    assert "".join(cp.assignments) == "BBBBBBMUM"
+    messages = [str(w.message) for w in record]
+    assert messages == [
+        "edges_vertices[7]: is a cut whose ends are both inside the paper and meet no other "
+        "cut (a slit), which cannot open; loaded as a free hinge (U, angle 0), as Origami "
+        "Simulator does"
+    ]
+    # with the cut reaching the paper's edge it opens: it stays a cut, and nothing is said
+    data["edges_assignment"][6] = "C"
+    data["edges_foldAngle"][6] = 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PatternWarning)
+        cp = from_fold_dict(data)
+    assert "".join(cp.assignments) == "BBBBBBCCM"
 
 
 @pytest.mark.parametrize(

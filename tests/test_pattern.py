@@ -258,6 +258,28 @@ INVALID = {
         dict(vertices=SQ_V + [[0.0, 0.0]], edges=SQ_E + [[0, 4]]),
         r"^edge 5 \(vertices 0, 4\): has zero length",
     ),
+    "edge almost zero": (
+        # vertex 4 sits 1e-14 from vertex 0, on the bottom side, with a valley to vertex 2
+        dict(
+            vertices=SQ_V + [[1e-14, 0.0]],
+            edges=[[0, 4], [4, 1], [1, 2], [2, 3], [3, 0], [4, 2]],
+            faces=[[0, 4, 2, 3], [4, 1, 2]],
+            assignments="BBBBBV",
+        ),
+        r"^edge 0 \(vertices 0, 4\): is 1e-14 long, under 1e-12 of the longest edge \(1\.41\): "
+        r"its two vertices nearly coincide$",
+    ),
+    "vertex far out": (
+        # a triangle out to 1e20 beside the unit square: its sides are not zero, it is too far
+        dict(
+            vertices=SQ_V + [[1e20, 0.0]],
+            edges=SQ_E + [[1, 4], [4, 2]],
+            faces=[[0, 1, 2], [0, 2, 3], [1, 4, 2]],
+            assignments="BMBBVBB",
+        ),
+        r"^edge 0 \(vertices 0, 1\): is 1 long, under 1e-12 of the longest edge \(1e\+20\): "
+        r"vertex 4 at \(1e\+20, 0, 0\) lies that far from the others",
+    ),
     # faces
     "faces missing": (dict(faces=None), r"^faces: missing"),
     "faces empty": (dict(faces=[]), r"^faces: the pattern has no faces"),

@@ -16,16 +16,23 @@ spelling ``edges_foldAngles`` is accepted too) and ``faces_vertices``; everythin
 * A missing ``faces_vertices`` (in a flat frame) is computed from the edges: the faces of their
   planar arrangement (:func:`~origami_jax.io.planar.pattern_from_segments`: crossing edges are
   split, end points within 1e-9 of the diagonal merge, holes are regions bounded by ``B``
-  edges only inside another face). The vertices keep their order, new crossing points last.
+  edges only inside another face; a border edge along a crease wins, with a warning, and other
+  edges that overlap with different assignments are an error naming both). The vertices keep
+  their order, new crossing points last.
 * Edges given twice are merged (a :class:`~origami_jax.PatternWarning`); twice with different
   assignments or fold angles is an error naming both.
-* ``J`` (join) edges are facet creases; ``C`` (cut) edges split the paper.
+* ``J`` (join) edges are facet creases; ``C`` (cut) edges split the paper. A cut whose two ends
+  are inside the paper and meet no other cut (a slit) cannot open: it is loaded as Origami
+  Simulator loads it, as a free hinge (``U``, angle 0), with a warning.
 * Coordinates are ``[x, y]`` or ``[x, y, z]``. A frame that is 3-D, or flat with faces turned
   clockwise (flipped over), is a **folded form**: it is unfolded onto the plane face by face
   (breadth first over shared edges, separate pieces side by side) to give the crease pattern,
   and its own positions become the pattern's ``start``, from which :func:`~origami_jax.fold`
-  starts. A folded form that does not unfold to a flat sheet (a non-planar face, or a vertex
-  that two faces put at different places, as in a closed box) is an error naming them.
+  starts. Without ``edges_foldAngle``, its ``M`` and ``V`` creases' targets are the angles they
+  have in it (so the folded form is its own equilibrium; mirrored, if most of its creases fold
+  against their letters), not the default +-180 degrees. A folded form that does not unfold to
+  a flat sheet (a non-planar face, or a vertex that two faces put at different places, as in a
+  closed box) is an error naming them.
 * A missing ``file_spec``, or one that is not a number from 1 to 1.2, gives a warning.
 
 Frames: frame 0 is the top level, frame ``k >= 1`` is ``file_frames[k - 1]``. A frame with
@@ -51,7 +58,9 @@ counterclockwise ``faces_vertices``.
 
 With a simulation result (any object with ``pattern``, ``positions`` (V_mesh, 3) and
 ``fold_angles`` (E_mesh,) radians, in the order of ``pattern.mesh``), ``file_frames`` holds one
-frame of class ``foldedForm``, attributes ``["3D"]``:
+frame of class ``foldedForm``, attributes ``["3D"]``, and after it one more per state of the
+result's ``frames`` (the path a fold followed from flat: the simulated fold angles frame by
+frame, an animation), each titled with its fold percent:
 
 * when the mesh has as many vertices as the pattern (no vertex was split by a cut), the frame has
   ``frame_parent: 0``, ``frame_inherit: true`` and only ``vertices_coords`` (3-D) and
@@ -76,6 +85,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import dataclasses
 import json
 import math
 import numbers
@@ -88,7 +98,7 @@ from typing import Any
 
 import numpy as np
 
-from origami_jax.io.planar import pattern_from_segments
+from origami_jax.io.planar import pattern_from_segments, slit_edges
 from origami_jax.pattern import (
     ASSIGNMENTS,
     MAX_COORDINATE,
@@ -316,6 +326,8 @@ def _read_frame(fr: dict, name: str) -> CreasePattern:
     ne = len(edges)
     assignments = _read_assignments(fr, ne)
     fold_angles = _read_fold_angles(fr, angle_key, ne, assignments)
+    if faces is not None and assignments is not None and "C" in assignments:
+        _open_slits(edges, faces, assignments, fold_angles)
     edges, assignments, fold_angles = _merge_duplicates(edges, assignments, fold_angles)
 
     flat = not np.any(np.abs(vertices[:, 2]) > 1e-12 * _scale(vertices))
@@ -333,7 +345,7 @@ def _read_frame(fr: dict, name: str) -> CreasePattern:
         # pattern, its positions kept as the start
         start = vertices
         vertices = _develop(vertices, faces)
-    return CreasePattern(
+    pattern = CreasePattern(
         vertices=vertices,
         edges=np.array(edges, dtype=np.int64).reshape(-1, 2),
         faces=tuple(tuple(f) for f in faces),
@@ -342,6 +354,44 @@ def _read_frame(fr: dict, name: str) -> CreasePattern:
         name=name,
         start=start,
     )
+    if start is not None and fold_angles is None:
+        # a folded form that gives no fold angles is its own target: its creases are driven to
+        # the angles they have in it (not to the assignments' default +-180 degrees)
+        angles, mirrored = _folded_angles(pattern)
+        if mirrored:  # unfolded onto the plane face down: its mirror image is the one meant
+            pattern = dataclasses.replace(pattern, start=start * np.array([1.0, 1.0, -1.0]))
+        pattern = pattern.with_fold_angles(angles)
+    return pattern
+
+
+def _folded_angles(pattern: CreasePattern) -> tuple[np.ndarray, bool]:
+    """(E,) the fold angles (radians) of a pattern's ``M`` and ``V`` edges in its ``start``: the
+    size of the atan2 dihedral of the triangles beside each edge, negative for ``M``; its other
+    edges' own targets elsewhere. And whether the start is the mirror image of the form the
+    assignments describe (most creases folded against their letter)."""
+    mesh = pattern.mesh
+    x = np.asarray(pattern.start, np.float64)[mesh.source_vertex]
+    out = np.array(pattern.fold_angles, np.float64)
+    creases = [
+        k
+        for k in range(pattern.num_edges)
+        if pattern.assignments[k] in "MV" and not np.any(mesh.hinges[k] < 0)
+    ]
+    measured = {}
+    for k in creases:
+        i, j, a, b = mesh.hinges[k]
+        e = x[j] - x[i]
+        n_left, n_right = np.cross(e, x[a] - x[i]), np.cross(x[b] - x[i], e)
+        sin = np.dot(np.cross(n_right, n_left), e) / np.linalg.norm(e)
+        measured[k] = math.atan2(sin, np.dot(n_left, n_right))
+    # folded flat (+-180 degrees) a crease has no side: the others tell which way up it is
+    sided = [k for k in creases if 1e-9 < abs(measured[k]) < math.pi - 1e-9]
+    agree = sum((measured[k] > 0) == (pattern.assignments[k] == "V") for k in sided)
+    mirrored = 2 * agree < len(sided)
+    for k in creases:
+        size = abs(measured[k])
+        out[k] = size if pattern.assignments[k] == "V" else -size
+    return out, mirrored
 
 
 def _read_assignments(fr: dict, ne: int) -> list[str] | None:
@@ -380,6 +430,30 @@ def _read_fold_angles(fr: dict, key: str, ne: int, assignments) -> np.ndarray | 
             raise PatternError(f"{key}[{i}]: {deg:g} degrees is outside [-180, 180]")
         rad[i] = math.radians(deg)
     return rad
+
+
+def _open_slits(edges, faces, assignments: list[str], fold_angles) -> None:
+    """Make each cut that cannot open (both ends inside the paper, neither on another cut: a
+    slit) a free hinge, in place, with a warning, as Origami Simulator loads it."""
+    sides = collections.Counter(
+        (min(f[i - 1], f[i]), max(f[i - 1], f[i])) for f in faces for i in range(len(f))
+    )
+    # an edge with one face is on the paper's edge, whatever its letter
+    letters = [
+        "B" if sides[(min(a, b), max(a, b))] == 1 else x
+        for (a, b), x in zip(edges, assignments, strict=True)
+    ]
+    for k in slit_edges(edges, letters):
+        warnings.warn(
+            f"edges_vertices[{k}]: is a cut whose ends are both inside the paper and meet no "
+            "other cut (a slit), which cannot open; loaded as a free hinge (U, angle 0), as "
+            "Origami Simulator does",
+            PatternWarning,
+            stacklevel=6,
+        )
+        assignments[k] = "U"
+        if fold_angles is not None:
+            fold_angles[k] = 0.0
 
 
 def _merge_duplicates(edges, assignments, fold_angles):
@@ -678,7 +752,9 @@ def to_fold_dict(pattern: CreasePattern, result: Any = None) -> dict:
       pattern: the crease pattern (the top-level frame).
       result: ``None`` or an object with ``positions`` ((V_mesh, 3), mesh vertex order) and
         ``fold_angles`` ((E_mesh,) radians); written as ``file_frames[0]``, a ``foldedForm``
-        frame (see the module docstring). Its ``pattern`` attribute, if any, is not used.
+        frame (see the module docstring); its ``frames`` (a fold's path from flat, each with
+        ``percent``, ``positions`` and ``fold_angles``), if any, follow as further frames,
+        titled ``"path k: fold percent p"``. Its ``pattern`` attribute, if any, is not used.
 
     Raises:
       ValueError: the result's arrays have the wrong shape or non-finite values.
@@ -706,6 +782,11 @@ def to_fold_dict(pattern: CreasePattern, result: Any = None) -> dict:
     if result is not None:
         positions, angles = _result_arrays(pattern, result.positions, result.fold_angles)
         out["file_frames"] = [_folded_frame(pattern, positions, angles)]
+        for k, frame in enumerate(getattr(result, "frames", None) or ()):
+            positions, angles = _result_arrays(pattern, frame.positions, frame.fold_angles)
+            state = _folded_frame(pattern, positions, angles)
+            state["frame_title"] = f"path {k}: fold percent {100 * frame.percent:.6g}"
+            out["file_frames"].append(state)
     return out
 
 

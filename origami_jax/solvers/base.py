@@ -9,7 +9,7 @@ fields ``u``, ``reference``, ``iteration``, ``energy``, ``grad_max``, ``grad_max
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import IntEnum
 from typing import Any, NamedTuple, Protocol
 
@@ -18,7 +18,17 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from origami_jax.energy import FoldParams, Structure, energy
+from origami_jax.barrier import S_MIN, rest_areas, signed_areas
+from origami_jax.energy import (
+    FoldParams,
+    Reference,
+    Structure,
+    barrier_distances,
+    energy,
+    initial_reference,
+    springs_only,
+)
+from origami_jax.geometry import dihedral_angles, dihedral_gradients
 from origami_jax.pattern import Mesh, PatternError
 
 __all__ = [
@@ -27,6 +37,11 @@ __all__ = [
     "Progress",
     "Solver",
     "make_problem",
+    "start_reference",
+    "has_barriers",
+    "tolerance_scale",
+    "stop_closing",
+    "barrier_limit",
     "prepare",
     "check_start",
     "next_status",
@@ -60,7 +75,9 @@ class Problem:
     of any vertex in one iteration (pattern units), so that no hinge turns by more than about
     a quarter turn per step and the solve follows a folding path instead of jumping across one;
     ``aux`` what a solver attaches in its ``prepare`` (Newton: the Hessian's layout; dynamics:
-    the vertex masses), ``None`` for solvers that need nothing.
+    the vertex masses), ``None`` for solvers that need nothing; ``reference`` what the start is
+    measured against (a continuation carries its last state's), ``None`` for
+    :func:`~origami_jax.energy.initial_reference` of the start.
     """
 
     structure: Structure
@@ -71,6 +88,14 @@ class Problem:
     tol: Array
     max_step: Array
     aux: Any = None
+    reference: Reference | None = None
+
+
+def start_reference(problem: Problem) -> Reference:
+    """The :class:`~origami_jax.energy.Reference` a solve starts from (see ``Problem``)."""
+    if problem.reference is not None:
+        return problem.reference
+    return initial_reference(problem.start, problem.structure, problem.params)
 
 
 class Progress(NamedTuple):
@@ -248,6 +273,7 @@ def make_problem(
     start: np.ndarray | None = None,
     tol: float = 1e-9,
     max_step: float | None = None,
+    reference: Reference | None = None,
 ) -> Problem:
     dtype = params.rest_length.dtype
     start = mesh.vertices if start is None else np.asarray(start, np.float64)
@@ -260,6 +286,7 @@ def make_problem(
         projectors=jnp.asarray(projectors, dtype),
         tol=jnp.asarray(tol, dtype),
         max_step=jnp.asarray(default_max_step(mesh) if max_step is None else max_step, dtype),
+        reference=reference,
     )
 
 
@@ -299,3 +326,80 @@ def positions(problem: Problem, u: Array) -> Array:
 
 def objective(u: Array, problem: Problem, reference: Array) -> Array:
     return energy(positions(problem, u), problem.structure, problem.params, reference)
+
+
+def tolerance_scale(problem: Problem, u: Array, reference: Reference, grad_max: Array) -> Array:
+    """What ``grad_norm_rel`` divides by: the largest entry of the gauged gradient at the start
+    (``grad_max``), of the springs alone where the scene has barriers (a start pushed into a
+    barrier's stiff continuation has a gradient that says nothing of the springs' scale)."""
+    if not has_barriers(problem.structure):
+        return grad_max
+    springs = replace(problem, structure=springs_only(problem.structure))
+    return jnp.max(jnp.abs(jax.grad(objective)(u, springs, reference)))
+
+
+def has_barriers(structure: Structure) -> bool:
+    """Whether the scene was built with a barrier (a static fact of its structure)."""
+    return (structure.barriers.hinge_gap > 0 and structure.hinges.shape[0] > 0) or (
+        structure.triangles.shape[0] > 0
+    )
+
+
+# a step may close at most this fraction of any barrier's distance to its wall (to first order)
+BARRIER_APPROACH = 0.9
+
+
+def barrier_limit(x: Array, step: Array, problem: Problem, reference: Reference) -> Array:
+    """The largest multiple of ``step`` (at most 1) that closes no barrier's distance to its
+    wall by more than :data:`BARRIER_APPROACH`, to first order: the iterates approach a wall
+    geometrically instead of landing on it, where its curvature would swamp the Newton system
+    (the conservative step of incremental potential contact's line search)."""
+
+    def distances(y):
+        return barrier_distances(y, problem.structure, problem.params, reference)
+
+    d, rate = jax.jvp(distances, (x,), (step,))
+    # a barrier already in its stiff continuation (pushed there by a step's second-order
+    # change) is left to the energy: limiting it would only stop the iterates
+    closing = (rate < 0) & (d > S_MIN)
+    room = jnp.where(closing, BARRIER_APPROACH * jnp.maximum(d, 0.0), 1.0)
+    t = room / jnp.where(closing, -rate, 1.0)
+    return jnp.minimum(1.0, jnp.min(t, initial=1.0))
+
+
+def stop_closing(v: Array, x: Array, problem: Problem, reference: Reference) -> Array:
+    """Velocities ``v`` (V, 3) at ``x`` less, for every barrier inside its active zone that
+    they would close, their component along that barrier's distance gradient: an inelastic
+    stop at the wall, local to the barrier's corners (for explicit dynamics, whose step no
+    barrier's unbounded stiffness allows)."""
+    structure = problem.structure
+    out = v
+    gap = structure.barriers.hinge_gap
+    if gap > 0 and structure.hinges.shape[0]:
+        q = x[structure.hinges]
+        rho = dihedral_angles(q, reference.angles)
+        grad = -(jnp.sign(rho) / gap)[:, None, None] * dihedral_gradients(q)
+        out = _remove_closing(out, v, structure.hinges, (gap - (jnp.abs(rho) - jnp.pi)) / gap, grad)
+    if structure.triangles.shape[0]:
+        floor = structure.barriers.area_floor
+
+        def ratio(p, n, area0):
+            return signed_areas(p, jnp.array([[0, 1, 2]]), n[None])[0] / (area0 * floor)
+
+        area0 = rest_areas(problem.params.rest_length[structure.triangle_bars])
+        real = area0 > 0
+        d, grad = jax.vmap(jax.value_and_grad(ratio))(
+            x[structure.triangles], reference.normals, jnp.where(real, area0, 1.0)
+        )
+        out = _remove_closing(out, v, structure.triangles, jnp.where(real, d, 2.0), grad)
+    return out
+
+
+def _remove_closing(out: Array, v: Array, corners: Array, d: Array, grad: Array) -> Array:
+    """``out`` less each closing active barrier's (``d < 1``, rate ``grad . v < 0``) velocity
+    component along its gradient ``grad`` (n, k, 3) over its ``corners`` (n, k)."""
+    rate = jnp.sum(grad * v[corners], axis=(1, 2))
+    norm2 = jnp.sum(grad * grad, axis=(1, 2))
+    closing = (d < 1.0) & (rate < 0) & (norm2 > 0)
+    scale = jnp.where(closing, rate / jnp.where(norm2 > 0, norm2, 1.0), 0.0)
+    return out.at[corners].add(-scale[:, None, None] * grad)

@@ -37,7 +37,7 @@ Example:
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import jax
@@ -45,19 +45,24 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from origami_jax.energy import initial_reference
-from origami_jax.geometry import fold_angles
+from origami_jax.energy import Reference, springs_only, update_reference
 from origami_jax.pattern import Mesh
 from origami_jax.solvers.base import (
     Problem,
     Progress,
     Status,
+    barrier_limit,
     doubled_areas,
+    gauge,
+    has_barriers,
     has_converged,
     next_status,
     objective,
     positions,
     run_steps,
+    start_reference,
+    stop_closing,
+    tolerance_scale,
 )
 
 __all__ = ["Dynamics", "DynamicsState", "max_eigenvalue", "lumped_mass", "origami_simulator"]
@@ -67,7 +72,7 @@ class DynamicsState(NamedTuple):
     u: Array  # (V, 3) displacement from problem.start, before the gauge
     v: Array  # (V, 3) velocities
     force: Array  # (V, 3) conservative force at u (velocity Verlet reuses it)
-    reference: Array  # (H,) unwrap reference of each torsion hinge, radians
+    reference: Reference  # what the energy measures against (unwrap, triangle normals)
     iteration: Array
     energy: Array
     grad_max: Array
@@ -222,10 +227,13 @@ class Dynamics:
         u = jnp.zeros_like(problem.start)
         mass = self._mass(problem)
         p0 = self._at_percent(problem, jnp.zeros((), jnp.int32))
-        reference = initial_reference(problem.start, problem.structure, problem.params)
+        reference = start_reference(problem)
         value, grad = jax.value_and_grad(objective)(u, p0, reference)
+        # the springs' stiffest mode sets the step: a barrier's stiffness is unbounded, and its
+        # walls are kept by the step limit instead (see ``step``)
+        springs = replace(problem, structure=springs_only(problem.structure))
         lam = jnp.maximum(
-            max_eigenvalue(lambda w: objective(w, problem, reference), u, 1.0 / mass),
+            max_eigenvalue(lambda w: objective(w, springs, reference), u, 1.0 / mass),
             jnp.finfo(u.dtype).tiny,
         )
         if self.damping == "bar":
@@ -261,7 +269,7 @@ class Dynamics:
             iteration=zero,
             energy=value,
             grad_max=gmax,
-            grad_max0=gmax,
+            grad_max0=tolerance_scale(problem, u, reference, gmax),
             status=status.astype(jnp.int32),
             dt=dt,
             dt_stable=dt_stable,
@@ -299,13 +307,28 @@ class Dynamics:
                 f = f + self._bar_damping(vel, p, mass[:, 0])
             return f
 
+        barriers = has_barriers(problem.structure)
+        x = positions(problem, s.u)
         if self.integrator == "euler":
             v = v + dt * total_force(force, v) / mass
-            u = s.u + dt * v
-            new_force = force
+            if barriers:  # the barrier's stiffness is beyond any stable time step: see base
+                v = stop_closing(v, x, p, s.reference)
+            du = dt * v
         else:
             a = total_force(force, v) / mass
-            u = s.u + dt * v + 0.5 * dt * dt * a
+            if barriers:
+                v = stop_closing(v, x, p, s.reference)
+                a = stop_closing(a, x, p, s.reference)
+            du = dt * v + 0.5 * dt * dt * a
+        if barriers:
+            # what still closes a barrier fast (one outside its zone) is cut short, with the
+            # velocity: no step lands on a wall
+            t = barrier_limit(x, gauge(problem, du), p, s.reference)
+            du, v = t * du, t * v
+        u = s.u + du
+        if self.integrator == "euler":
+            new_force = force
+        else:
             value, grad = grad_of(u, p, s.reference)
             new_force = -grad
             v = v + 0.5 * dt * (a + total_force(new_force, v) / mass)
@@ -324,8 +347,10 @@ class Dynamics:
         take = finite & ~converged if self.integrator == "euler" else finite
         keep = lambda new, old: jnp.where(take, new, old)  # noqa: E731
         u = keep(u, s.u)
-        reference = keep(
-            fold_angles(positions(problem, u), problem.structure.hinges, s.reference), s.reference
+        reference = jax.tree.map(
+            keep,
+            update_reference(positions(problem, u), problem.structure, s.reference),
+            s.reference,
         )
         return DynamicsState(
             u=u,

@@ -16,8 +16,7 @@ import jax.numpy as jnp
 import optax
 from jax import Array
 
-from origami_jax.energy import initial_reference
-from origami_jax.geometry import fold_angles
+from origami_jax.energy import Reference, update_reference
 from origami_jax.solvers.base import (
     Problem,
     Progress,
@@ -27,6 +26,8 @@ from origami_jax.solvers.base import (
     objective,
     positions,
     run_steps,
+    start_reference,
+    tolerance_scale,
 )
 
 __all__ = ["Lbfgs", "LbfgsState"]
@@ -45,7 +46,7 @@ def limit_displacement(max_step) -> optax.GradientTransformation:
 class LbfgsState(NamedTuple):
     u: Array  # (V, 3) displacement from problem.start, before the gauge
     opt_state: optax.OptState
-    reference: Array  # (H,) unwrap reference of each torsion hinge, radians
+    reference: Reference  # what the energy measures against (unwrap, triangle normals)
     iteration: Array
     energy: Array
     grad_max: Array
@@ -93,7 +94,7 @@ class Lbfgs:
         return LbfgsState(
             u=u,
             opt_state=self._optimizer().init(u),
-            reference=initial_reference(problem.start, problem.structure, problem.params),
+            reference=start_reference(problem),
             iteration=jnp.zeros((), jnp.int32),
             energy=jnp.full((), jnp.inf, u.dtype),
             grad_max=one,
@@ -113,7 +114,9 @@ class Lbfgs:
             value, grad = optax.value_and_grad_from_state(f)(s.u, state=s.opt_state)
             first = s.iteration == 0
             g_start = jnp.max(jnp.abs(grad))
-            grad_max0 = jnp.where(first, g_start, s.grad_max0)
+            grad_max0 = jnp.where(
+                first, tolerance_scale(problem, s.u, s.reference, g_start), s.grad_max0
+            )
             updates, opt_state = opt.update(
                 grad, s.opt_state, s.u, value=value, grad=grad, value_fn=f
             )
@@ -135,8 +138,9 @@ class Lbfgs:
             # a non-finite step is not taken: the state keeps the last finite iterate
             keep = lambda new, old: jnp.where(finite, new, old)  # noqa: E731
             u = keep(u, s.u)
-            reference = keep(
-                fold_angles(positions(problem, u), problem.structure.hinges, s.reference),
+            reference = jax.tree.map(
+                keep,
+                update_reference(positions(problem, u), problem.structure, s.reference),
                 s.reference,
             )
             opt_state = jax.tree.map(keep, opt_state, s.opt_state)

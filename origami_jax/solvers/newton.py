@@ -63,7 +63,7 @@ from __future__ import annotations
 import functools
 import weakref
 from dataclasses import dataclass, replace
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -71,13 +71,23 @@ import numpy as np
 import scipy.sparse as sp
 from jax import Array
 
-from origami_jax.energy import Structure, energy, hinge_goals, initial_reference, residuals
+from origami_jax.barrier import S_MIN, rest_areas
+from origami_jax.energy import (
+    Reference,
+    Structure,
+    barrier_distances,
+    energy,
+    hinge_terms,
+    hinge_weights,
+    residuals,
+    triangle_terms,
+    update_reference,
+)
 from origami_jax.geometry import (
     bar_lengths,
     dihedral_angles,
     dihedral_gradients,
     dihedral_hessians,
-    fold_angles,
 )
 from origami_jax.pattern import Mesh
 from origami_jax.solvers import blocksparse, hostsparse
@@ -85,13 +95,17 @@ from origami_jax.solvers.base import (
     Problem,
     Progress,
     Status,
+    barrier_limit,
     gauge,
+    has_barriers,
     has_converged,
     next_status,
     piece_labels,
     pin_axes,
     positions,
     run_steps,
+    start_reference,
+    tolerance_scale,
 )
 from origami_jax.solvers.blocksparse import BlockPlan
 from origami_jax.solvers.innermost import batch_innermost
@@ -103,6 +117,7 @@ __all__ = [
     "hessian_layout",
     "layout_arrays",
     "element_blocks",
+    "hessian_elements",
     "assemble",
 ]
 
@@ -180,10 +195,17 @@ class HessianLayout:
         return int(self.indices.shape[0]) if self.sparse else self.size**2
 
 
-# the corner pairs (a, b), a <= b, of an element of 2 (bar) or 4 (hinge) corners, as the arrays
-# of their a and of their b: the upper triangle of its symmetric Hessian, all that the sparse
-# assembly computes
-UPPER_PAIRS = {k: np.triu_indices(k) for k in (2, 4)}
+# the corner pairs (a, b), a <= b, of an element of 2 (bar), 3 (triangle) or 4 (hinge) corners,
+# as the arrays of their a and of their b: the upper triangle of its symmetric Hessian, all that
+# the sparse assembly computes
+UPPER_PAIRS = {k: np.triu_indices(k) for k in (2, 3, 4)}
+
+
+def hessian_elements(structure: Structure) -> list:
+    """The vertex index arrays of the elements whose Hessians the energy's is assembled from, in
+    the order of :func:`element_blocks`: bars, then hinges and barrier triangles where the
+    scene has them."""
+    return [structure.bars] + [e for e in (structure.hinges, structure.triangles) if e.shape[0]]
 
 
 def _element_pairs(elements: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -229,15 +251,14 @@ def hessian_layout(mesh: Mesh, structure: Structure, sparse: bool) -> HessianLay
     hit = _LAYOUTS.get(key)
     if hit is not None and hit[0]() is mesh:
         return hit[1]
-    bars = np.asarray(structure.bars)
-    hinges = np.asarray(structure.hinges)
+    elements = [np.asarray(e) for e in hessian_elements(structure)]
     vertex_order = None
     if sparse:
-        vr, vc = _element_pairs([bars] + ([hinges] if len(hinges) else []))
+        vr, vc = _element_pairs(elements)
         v = mesh.num_vertices
         adjacency = sp.csr_matrix((np.ones(len(vr)), (vr, vc)), shape=(v, v))
         vertex_order = nested_dissection(mesh.vertices[:, :2], adjacency)
-    layout = jax.tree.map(jnp.asarray, layout_arrays(bars, hinges, mesh.num_vertices, vertex_order))
+    layout = jax.tree.map(jnp.asarray, layout_arrays(elements, mesh.num_vertices, vertex_order))
     _LAYOUTS[key] = (weakref.ref(mesh), layout)
     return layout
 
@@ -256,13 +277,15 @@ def _vertex_pieces(bars: np.ndarray, num_vertices: int) -> np.ndarray:
 
 
 def layout_arrays(
-    bars: np.ndarray, hinges: np.ndarray, num_vertices: int, vertex_order: np.ndarray | None
+    elements: list[np.ndarray], num_vertices: int, vertex_order: np.ndarray | None
 ) -> HessianLayout:
-    """A :class:`HessianLayout` of NumPy arrays: sparse in ``vertex_order`` when one is given,
-    else dense (slots index the flat 3V x 3V matrix)."""
+    """A :class:`HessianLayout` of NumPy arrays for :func:`hessian_elements` ``elements`` (bars
+    first): sparse in ``vertex_order`` when one is given, else dense (slots index the flat
+    3V x 3V matrix)."""
     v = num_vertices
     n = 3 * v
-    parts = [bars] + ([hinges] if len(hinges) else [])
+    bars = elements[0]
+    parts = [e for e in elements if len(e)]
     diag = np.arange(v)[:, None, None] * 3 + np.arange(3)
     diag_r = np.broadcast_to(diag, (v, 3, 3)).ravel()
     diag_c = np.broadcast_to(diag.transpose(0, 2, 1), (v, 3, 3)).ravel()
@@ -343,16 +366,21 @@ def element_blocks(
     x: Array,
     structure: Structure,
     params,
-    reference: Array,
+    reference: Reference,
     exact: Array | bool,
     upper: bool = False,
 ) -> list[Array]:
-    """The element Hessians as 3 x 3 blocks of vertex pairs: bars (E, 2, 2, 3, 3), then hinges
-    (H, 4, 4, 3, 3) if any (``[e, a, b]`` the block of rows of corner ``a``, columns of ``b``);
-    with ``upper`` only the pairs ``a <= b`` of :data:`UPPER_PAIRS`: (E, 3, 3, 3), (H, 10, 3, 3).
+    """The element Hessians as 3 x 3 blocks of vertex pairs, in the order of
+    :func:`hessian_elements`: bars (E, 2, 2, 3, 3), then hinges (H, 4, 4, 3, 3) and barrier
+    triangles (T, 3, 3, 3, 3) if any (``[e, a, b]`` the block of rows of corner ``a``, columns
+    of ``b``); with ``upper`` only the pairs ``a <= b`` of :data:`UPPER_PAIRS`: (E, 3, 3, 3),
+    (H, 10, 3, 3), (T, 6, 3, 3).
 
-    ``exact`` selects the exact Hessian; otherwise its convex part (compressive bar term and
-    the hinges' ``(rho - goal) hess(rho)`` term dropped), positive semi-definite.
+    A hinge's energy ``e(rho)`` (spring and barrier) has the Hessian
+    ``e'' grad(rho) grad(rho)^T + e' hess(rho)``, a triangle's barrier ``e(r)`` of its area
+    ratio ``r`` likewise. ``exact`` selects the exact Hessian; otherwise its convex part (the
+    bars' compressive term and the ``e' hess`` terms dropped; ``e'' >= 0`` for every term),
+    positive semi-definite.
 
     With a trailing batch axis (``x`` (V, 3, B), see :mod:`origami_jax.solvers.innermost`), the
     blocks have it last.
@@ -377,12 +405,16 @@ def element_blocks(
     else:
         out = [sign[(None, slice(None), slice(None), None, None, *ones)] * a[:, None, None]]
     if structure.hinges.shape[0]:
-        goal, stiffness = hinge_goals(structure, params)
+        goal, kl = hinge_weights(structure, params)
         q = x[structure.hinges]
         g = dihedral_gradients(q)
         pairs = list(zip(*UPPER_PAIRS[4], strict=True)) if upper else None
         pad = (slice(None),) + (None,) * (3 if upper else 4)
-        kl = (stiffness * l0[structure.hinge_bars])[pad]
+        barrier = structure.barriers.hinge_gap > 0
+        # a barrier's curvature depends on the angle, a spring's does not: the angle (and its
+        # dihedral) only where needed
+        rho = dihedral_angles(q, reference.angles) if barrier else None
+        d2 = hinge_terms(rho, structure, params)[2] if barrier else kl
 
         def gauss_newton():  # in each branch: computed once, where it is used
             full = g[:, :, None, :, None] * g[:, None, :, None, :]
@@ -390,14 +422,15 @@ def element_blocks(
                 # all 16 outer products and then the 10: a gather of the corners first made
                 # XLA read them strided, several times slower
                 full = full[(slice(None), *UPPER_PAIRS[4])]
-            return kl * full
+            return d2[pad] * full
 
         def with_curvature(weight=1.0):
             # the angle's own Hessian is most of an iteration's work on small patterns: only
             # when asked
-            rho = dihedral_angles(q, reference)
+            angle = rho if barrier else dihedral_angles(q, reference.angles)
+            d1 = hinge_terms(angle, structure, params)[1]
             h = dihedral_hessians(q, pairs)
-            return gauss_newton() + (kl * weight * (rho - goal)[pad]) * h
+            return gauss_newton() + (weight * d1)[pad] * h
 
         if isinstance(exact, bool):
             out.append(with_curvature() if exact else gauss_newton())
@@ -414,7 +447,64 @@ def element_blocks(
                 lambda: gauss_newton().reshape(shape),
             )
             out.append(blocks.reshape(-1, 10, 3, 3, *trailing) if upper else blocks)
+    if structure.triangles.shape[0]:
+        out.append(_triangle_blocks(x, structure, params, reference, exact, upper))
     return out
+
+
+def _skew(v: Array) -> Array:
+    """(T, 3, 3, ...) the matrices ``[v]`` with ``[v] w = v x w`` of vectors ``v`` (T, 3, ...)."""
+    z = jnp.zeros_like(v[:, 0])
+    v0, v1, v2 = v[:, 0], v[:, 1], v[:, 2]
+    rows = ([z, -v2, v1], [v2, z, -v0], [-v1, v0, z])
+    return jnp.stack([jnp.stack(r, axis=1) for r in rows], axis=1)
+
+
+def _triangle_blocks(x, structure, params, reference, exact, upper):
+    """The area barrier's element Hessians: (T, 3, 3, 3, 3), or (T, 6, 3, 3) with ``upper``.
+
+    With ``n = (p1 - p0) x (p2 - p0)`` and ``J_k = dn / dp_k`` (``[p2 - p1]``, ``-[p2 - p0]``,
+    ``[p1 - p0]`` as cross-product matrices), the area ``|n| / 2`` has the gradient
+    ``J_k^T n^ / 2`` and the Hessian ``(J_j^T (I - n^ n^T) J_k / |n| + K_jk) / 2``, ``K`` the
+    constant second derivative of ``n^ . n`` (``-[n^]`` for the pairs (0, 1), (1, 2), (2, 0))."""
+    trailing = x.shape[2:]
+    ones = (None,) * len(trailing)
+    ratio, _, d1, d2 = triangle_terms(x, structure, params, reference.normals)
+    p = x[structure.triangles]  # (T, 3, 3, ...)
+    p0, p1, p2 = p[:, 0], p[:, 1], p[:, 2]
+    jac = [_skew(p2 - p1), -_skew(p2 - p0), _skew(p1 - p0)]
+    n = jnp.einsum("tij...,tj...->ti...", jac[2], p2 - p0)  # (p1 - p0) x (p2 - p0)
+    norm = jnp.sqrt(jnp.sum(n * n, axis=1))
+    safe = jnp.where(norm > 0, norm, 1.0)
+    unit = n / safe[:, None]
+    l0 = params.rest_length[structure.triangle_bars]
+    area0 = rest_areas(l0)
+    # d(ratio)/d(area): the sign of the area (turned over: negative) over the rest area
+    scale = jnp.sign(ratio) / jnp.where(area0 > 0, area0, 1.0)
+    grads = [0.5 * jnp.einsum("tji...,tj...->ti...", j, unit) for j in jac]
+    eye = jnp.eye(3, dtype=x.dtype)[(..., *ones)]
+    proj = (eye - unit[:, :, None] * unit[:, None, :]) / safe[:, None, None]
+    k_skew = -_skew(unit)
+    corner_pairs = (
+        list(zip(*UPPER_PAIRS[3], strict=True))
+        if upper
+        else [(a, b) for a in range(3) for b in range(3)]
+    )
+
+    def block(a, b):
+        outer = (d2 * scale * scale)[:, None, None] * (grads[a][:, :, None] * grads[b][:, None, :])
+        if isinstance(exact, bool) and not exact:
+            return outer
+        curvature = jnp.einsum("tki...,tkl...,tlj...->tij...", jac[a], proj, jac[b])
+        if (a, b) in ((0, 1), (1, 2), (2, 0)):
+            curvature = curvature + k_skew
+        elif (b, a) in ((0, 1), (1, 2), (2, 0)):
+            curvature = curvature - k_skew
+        weight = (0.5 * d1 * scale * jnp.asarray(exact, x.dtype))[:, None, None]
+        return outer + weight * curvature
+
+    blocks = jnp.stack([block(a, b) for a, b in corner_pairs], axis=1)
+    return blocks if upper else blocks.reshape(-1, 3, 3, 3, 3, *trailing)
 
 
 @jax.custom_batching.custom_vmap
@@ -452,7 +542,7 @@ def _project_pinned(matrix: Array, pinned: Array, projectors: Array) -> Array:
     return matrix.at[:, :, pinned].set(cols)
 
 
-def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) -> Array:
+def assemble(x: Array, problem: Problem, reference: Reference, exact: Array | bool) -> Array:
     """Storage values of the gauged Hessian (exact or its convex part) in ``problem.aux``'s
     layout, before the pinned directions' identity.
 
@@ -462,7 +552,7 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
     structure = problem.structure
     blocks = element_blocks(x, structure, problem.params, reference, exact, upper=layout.sparse)
     v = problem.start.shape[0]
-    elements = [structure.bars, structure.hinges][: len(blocks)]
+    elements = hessian_elements(structure)
     if layout.sparse:
         proj = _vertex_projectors(v, problem.pinned, problem.projectors)
         num = layout.block_vertices.shape[0]
@@ -492,7 +582,7 @@ def assemble(x: Array, problem: Problem, reference: Array, exact: Array | bool) 
     return _project_pinned(matrix, problem.pinned, problem.projectors).reshape(-1)
 
 
-def gauged_hessian(x: Array, problem: Problem, reference: Array, exact: Array | bool) -> Array:
+def gauged_hessian(x: Array, problem: Problem, reference: Reference, exact: Array | bool) -> Array:
     """:func:`assemble` plus a stiffness-sized identity on the pinned (gauged-out) directions, so
     the system stays well scaled: the matrix Newton's step and the implicit derivatives of
     :mod:`origami_jax.design` factor."""
@@ -509,7 +599,7 @@ def _gauge_scale(problem: Problem) -> Array:
     return jnp.mean(problem.params.stiffness.axial / problem.params.rest_length)
 
 
-def energy_noise(x: Array, problem: Problem, reference: Array, value: Array) -> Array:
+def energy_noise(x: Array, problem: Problem, reference: Reference, value: Array) -> Array:
     """How much the computed energy can move by rounding alone near ``x``: 16 eps times the
     energy plus each element's force times its length (bars) or moment (hinges). In a strained
     equilibrium the element forces are far larger than the energy's own size suggests; below
@@ -518,23 +608,26 @@ def energy_noise(x: Array, problem: Problem, reference: Array, value: Array) -> 
     return 16 * jnp.finfo(x.dtype).eps * (jnp.abs(value) + work)
 
 
-def _element_work(x: Array, structure: Structure, params, reference: Array) -> Array:
-    """The sum of each element's force times its length (bars) or moment (hinges)."""
+def _element_work(x: Array, structure: Structure, params, reference: Reference) -> Array:
+    """The sum of each element's force times its length (bars), moment (hinges) or energy's
+    derivative in its area ratio (barrier triangles)."""
     l0 = params.rest_length
     length = bar_lengths(x, structure.bars)
     work = jnp.sum(params.stiffness.axial / l0 * jnp.abs(length - l0) * length, axis=0)
     if structure.hinges.shape[0]:
-        goal, stiffness = hinge_goals(structure, params)
-        rho = fold_angles(x, structure.hinges, reference)
-        work += jnp.sum(stiffness * l0[structure.hinge_bars] * jnp.abs(rho - goal), axis=0)
+        goal, weight = hinge_weights(structure, params)
+        rho = dihedral_angles(x[structure.hinges], reference.angles)
+        moment = hinge_terms(rho, structure, params)[1]
+        work += jnp.sum(jnp.abs(moment), axis=0)
+    if structure.triangles.shape[0]:
+        _, _, d1, _ = triangle_terms(x, structure, params, reference.normals)
+        work += jnp.sum(jnp.abs(d1), axis=0)
     return work
 
 
-def _hinge_angles(x: Array, structure: Structure, reference: Array) -> Array:
-    return fold_angles(x, structure.hinges, reference)
-
-
-def _vertex_buckling(x: Array, structure: Structure, params) -> tuple[Array, Array]:
+def _vertex_buckling(
+    x: Array, structure: Structure, params, reference: Reference
+) -> tuple[Array, Array]:
     """(V,) at each vertex, the negative transverse stiffness of its compressed bars,
     ``sum axial / l0 (l0 / l - 1)``, and the stiffness its hinges give it out of their planes,
     ``sum stiffness l0 |grad(rho)|^2`` (the trace of their Gauss-Newton blocks there): where the
@@ -551,13 +644,28 @@ def _vertex_buckling(x: Array, structure: Structure, params) -> tuple[Array, Arr
     softening = zeros.at[bars[:, 0]].add(soft).at[bars[:, 1]].add(soft)
     if not structure.hinges.shape[0]:
         return softening, zeros
-    g = dihedral_gradients(x[structure.hinges])
-    _, stiffness = hinge_goals(structure, params)
-    support = (stiffness * l0[structure.hinge_bars])[:, None] * jnp.sum(g * g, axis=2)
+    q = x[structure.hinges]
+    g = dihedral_gradients(q)
+    goal, weight = hinge_weights(structure, params)
+    if structure.barriers.hinge_gap > 0:  # a barrier near its wall supports the vertex too
+        weight = hinge_terms(dihedral_angles(q, reference.angles), structure, params)[2]
+    support = weight[:, None] * jnp.sum(g * g, axis=2)
     return softening, zeros.at[structure.hinges.reshape(-1)].add(support.reshape(-1, *trailing))
 
 
-def _energy_and_gradient(x: Array, structure: Structure, params, reference: Array):
+def _barrier_distances(x: Array, problem: Problem, reference: Reference) -> Array:
+    return barrier_distances(x, problem.structure, problem.params, reference)
+
+
+def barrier_feasible(y: Array, floor: Array, problem: Problem, reference: Reference) -> Array:
+    """Whether no barrier at ``y`` is closer to its wall than ``floor`` (per barrier: the stiff
+    continuation's edge, or deeper where the last iterate already was): the filter of the line
+    search, as incremental potential contact's, so the iterates stay where the barriers' own
+    curvature keeps the Newton system well conditioned."""
+    return jnp.all(_barrier_distances(y, problem, reference) >= floor, axis=0)
+
+
+def _energy_and_gradient(x: Array, structure: Structure, params, reference: Reference):
     value, pullback = jax.vjp(lambda y: energy(y, structure, params, reference), x)
     return value, pullback(jnp.ones_like(value))[0]
 
@@ -565,13 +673,13 @@ def _energy_and_gradient(x: Array, structure: Structure, params, reference: Arra
 # vmapped over problems of one topology (fold_batch), the element kernels of a step run with the
 # batch innermost (see innermost.py; also _second_order_pull and _block_factor below)
 _element_work = batch_innermost(_element_work, index_args=(1,))
-_hinge_angles = batch_innermost(_hinge_angles, index_args=(1,))
+_update_reference = batch_innermost(update_reference, index_args=(1,))
 _energy_and_gradient = batch_innermost(_energy_and_gradient, index_args=(1,))
 _energy = batch_innermost(energy, index_args=(1,))
 _vertex_buckling = batch_innermost(_vertex_buckling, index_args=(1,))
 
 
-def _value_and_grad(u: Array, problem: Problem, reference: Array):
+def _value_and_grad(u: Array, problem: Problem, reference: Reference):
     """Energy at displacement ``u``, its gradient in the positions, and the largest entry of
     that gradient gauged (the gradient in ``u``, which the convergence test reads)."""
     value, grad = _energy_and_gradient(
@@ -657,7 +765,7 @@ def rigid_fit(x: Array, problem: Problem):
 
 
 def _second_order_pull(
-    x: Array, velocity: Array, structure: Structure, params, reference: Array
+    x: Array, velocity: Array, structure: Structure, params, reference: Reference
 ) -> Array:
     """``J^T W r''[v, v]``: the residuals' second derivative along ``velocity`` at ``x``,
     weighted and pulled back to the positions (the right-hand side of geodesic acceleration)."""
@@ -682,7 +790,7 @@ def _block_factor(
     structure: Structure,
     x: Array,
     params,
-    reference: Array,
+    reference: Reference,
     exact: Array,
     proj: Array,
     scale: Array,
@@ -731,7 +839,7 @@ _dense_solve_factored = _one_member_at_a_time(
 class NewtonState(NamedTuple):
     u: Array  # (V, 3) displacement from problem.start, before the gauge
     grad: Array  # (V, 3) gradient of the energy in the positions at u (not gauged)
-    reference: Array  # (H,) unwrap reference of each torsion hinge, radians
+    reference: Reference  # what the energy measures against (unwrap, triangle normals)
     iteration: Array
     energy: Array
     grad_max: Array
@@ -863,6 +971,8 @@ class Newton:
     max_stalls: int = 12
     patience: int = 30
     name: str = "newton"
+    # fold() follows the path from flat with this solver where a scene needs it (path="auto")
+    follows_path: ClassVar[bool] = True
 
     def __post_init__(self):
         if self.linear_solver not in ("auto", "dense", "sparse"):
@@ -877,7 +987,7 @@ class Newton:
 
     def init(self, problem: Problem) -> NewtonState:
         u = jnp.zeros_like(problem.start)
-        reference = initial_reference(problem.start, problem.structure, problem.params)
+        reference = start_reference(problem)
         value, grad, gmax = _value_and_grad(u, problem, reference)
         ok = jnp.isfinite(value) & jnp.isfinite(gmax)
         status = jnp.where(
@@ -891,7 +1001,7 @@ class Newton:
             iteration=zero,
             energy=value,
             grad_max=gmax,
-            grad_max0=gmax,
+            grad_max0=tolerance_scale(problem, u, reference, gmax),
             status=status.astype(jnp.int32),
             mu=jnp.asarray(self.mu_min, u.dtype),
             exact=jnp.zeros((), bool),
@@ -1020,7 +1130,7 @@ class Newton:
         x = positions(problem, s.u)
         if self.buckling_ratio != float("inf"):
             # far from equilibrium, no exact attempt where compressed bars would buckle the sheet
-            softening, support = _vertex_buckling(x, problem.structure, problem.params)
+            softening, support = _vertex_buckling(x, problem.structure, problem.params, s.reference)
             far = s.grad_max > self.buckling_far * s.grad_max0
             exact = exact & ~(far & jnp.any(softening > self.buckling_ratio * support))
         solve, used = self._factor(s, problem, exact, keep=accelerate)
@@ -1053,6 +1163,15 @@ class Newton:
             return jnp.max(jnp.sqrt(jnp.sum(rel * rel, axis=-1)) / problem.params.rest_length)
 
         limit = jnp.minimum(1.0, self.max_turn / jnp.maximum(turn(1.0), 1e-300))
+        barriers = has_barriers(problem.structure)
+        if barriers:
+            limit = jnp.minimum(limit, barrier_limit(x, step, problem, s.reference))
+            feasible = functools.partial(
+                barrier_feasible,
+                floor=jnp.minimum(S_MIN, _barrier_distances(x, problem, s.reference)),
+                problem=problem,
+                reference=s.reference,
+            )
         slope = limit * jnp.vdot(s.grad, step)
         ok = ok & (slope < 0)
 
@@ -1061,7 +1180,11 @@ class Newton:
             return x + t * step + (0.5 * t * t) * curve
 
         def value_at(alpha):
-            return _energy(point(alpha), problem.structure, problem.params, s.reference)
+            y = point(alpha)
+            value = _energy(y, problem.structure, problem.params, s.reference)
+            if barriers:  # a point that takes a barrier into its stiff continuation is refused
+                value = jnp.where(feasible(y), value, jnp.inf)
+            return value
 
         noise = energy_noise(x, problem, s.reference, s.energy)
 
@@ -1139,8 +1262,9 @@ class Newton:
         fast = new_value < self.convex_rate * s.energy
         keep = lambda new, old: jnp.where(take, new, old)  # noqa: E731
         u = keep(u, s.u)
-        reference = keep(
-            _hinge_angles(positions(problem, u), problem.structure, s.reference),
+        reference = jax.tree.map(
+            keep,
+            _update_reference(positions(problem, u), problem.structure, s.reference),
             s.reference,
         )
         # exact attempts are shifted once ``shift_after`` of them in a row have failed: 10x more

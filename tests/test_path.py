@@ -1,0 +1,108 @@
+"""Folding along the physical path: continuation in fold percent, its frames, their export,
+and the stiff and extreme cases a flat-foldable or rigid-foldable pattern must reach."""
+
+import json
+
+import numpy as np
+import pytest
+
+from origami_jax import CreasePattern, fold, io, patterns
+from origami_jax.barrier import HINGE_GAP
+from origami_jax.energy import Barriers
+from origami_jax.fold import PATH_END, is_planar
+from origami_jax.kinematics import rigid_fold
+
+
+def test_a_full_fold_follows_the_path_from_flat():
+    cp = patterns.degree4_vertex(2.0, 0.7, np.pi)
+    result = fold(cp)
+    assert result.path == "continuation" and result.barriers == Barriers()
+    assert result.converged, result.reason
+    assert result.fold_angle_error_max <= 1e-8 and len(result.through_pi) == 0
+    # the frames: flat first, fold percents rising to the full fold, the last one the result
+    percents = [f.percent for f in result.frames]
+    assert percents[0] == 0.0 and percents[-1] == pytest.approx(1.0)
+    assert np.all(np.diff(percents) >= 0)
+    np.testing.assert_array_equal(result.frames[-1].positions, result.positions)
+    np.testing.assert_allclose(result.frames[0].positions, cp.mesh.vertices)
+    for frame in result.frames:
+        assert frame.positions.shape == result.positions.shape
+        assert np.max(np.abs(frame.fold_angles)) <= np.pi + HINGE_GAP
+    # the history starts where a direct solve's does: flat, fully driven
+    direct = fold(cp, path="direct")
+    assert result.history["energy"][0] == pytest.approx(direct.history["energy"][0], rel=1e-12)
+    assert direct.frames == [] and direct.path == "direct"
+    assert result.history["grad_norm_rel"][-1] == pytest.approx(result.grad_norm_rel, rel=1e-9)
+
+
+def test_rigid_foldable_scenes_fold_directly_without_barriers():
+    cp = patterns.miura_ori(3, 3, fold_angle=1.5)
+    result = fold(cp, reference_positions=rigid_fold(cp))
+    assert result.path == "direct" and result.barriers == Barriers(0.0, 0.0)
+    assert result.shape_error <= 1e-8
+    with pytest.raises(ValueError, match="path must be"):
+        fold(cp, path="sideways")
+
+
+def test_path_frames_are_written_as_fold_frames(tmp_path):
+    cp = patterns.single_crease(fold_angle=np.pi)
+    result = fold(cp)
+    assert len(result.frames) >= 3
+    out = tmp_path / "path.fold"
+    io.save(out, result)
+    data = json.loads(out.read_text())
+    frames = data["file_frames"]
+    assert len(frames) == 1 + len(result.frames)
+    k = cp.mesh.edges_with_role("driven")[0]
+    for frame, state in zip(frames[1:], result.frames, strict=True):
+        assert frame["frame_title"].endswith(f"fold percent {100 * state.percent:.6g}")
+        assert frame["edges_foldAngle"][k] == pytest.approx(np.degrees(state.fold_angles[k]))
+    assert frames[-1]["edges_foldAngle"][k] == pytest.approx(180.0, abs=1e-6)
+
+
+def test_a_start_in_a_tilted_plane_counts_as_flat():
+    cp = patterns.single_crease(fold_angle=np.pi)
+    x = cp.mesh.vertices
+    turned = x @ np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # the sheet in the x-z plane
+    assert is_planar(turned) and not is_planar(rigid_fold(cp, 0.5 * cp.mesh.target))
+    assert fold(cp, start=turned).path == "continuation"
+    assert fold(cp, start=rigid_fold(cp, 0.5 * cp.mesh.target)).path == "direct"
+
+
+FLAT_FOLDABLE = {
+    "miura 3 x 3 (rigid)": patterns.miura_ori(3, 3, fold_angle=2.0),
+    "degree-4 vertex, flat": patterns.degree4_vertex(2.0, 0.7, np.pi),
+    "square twist, flat": patterns.square_twist(fold_angle=np.pi),
+}
+
+
+@pytest.mark.parametrize("name", list(FLAT_FOLDABLE))
+def test_stiff_and_extreme_cases_reach_the_zero_energy_state(name):
+    """A pattern with a zero-energy folded state reaches it, with no crease past pi, at every
+    axial : crease ratio from 1e2 to 1e8 (facets 20x the crease) and at sheet sizes 1e-6 and
+    1e6."""
+    cp = FLAT_FOLDABLE[name]
+    for ratio in (1e2, 1e4, 1e6, 1e8):
+        stiffness = {"axial": 1.0, "facet": 20.0 / ratio, "crease": 1.0 / ratio}
+        result = fold(cp, stiffness=stiffness)
+        assert result.converged, (ratio, result.reason)
+        assert result.fold_angle_error_max <= 1e-6, ratio
+        assert len(result.through_pi) == 0 and len(result.collapsed) == 0
+    for scale in (1e-6, 1e6):
+        scaled = CreasePattern(
+            cp.vertices * scale, cp.edges, cp.faces, cp.assignments, cp.fold_angles, cp.name
+        )
+        result = fold(scaled)
+        assert result.converged, (scale, result.reason)
+        assert result.fold_angle_error_max <= 1e-6 and len(result.through_pi) == 0
+
+
+def test_path_end_raises_the_stiffness_after_the_fold():
+    # the path's second half, at full percent, only stiffens the bars and facets back to
+    # the user's: the last frame and the result agree with a direct solve from there
+    assert PATH_END == 2.0
+    cp = patterns.degree4_vertex(2.0, 0.7, np.pi)
+    result = fold(cp)
+    again = fold(cp, start=result.positions, path="direct")
+    assert again.converged and again.iterations <= 2
+    np.testing.assert_allclose(again.positions, result.positions, atol=1e-9 * cp.diameter)
