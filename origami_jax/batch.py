@@ -157,7 +157,7 @@ def bucket(sizes: BatchSizes) -> BatchSizes:
 def problem_sizes(pattern: CreasePattern) -> BatchSizes:
     """The unpadded :class:`BatchSizes` of a pattern's folding problem."""
     mesh = pattern.mesh
-    s = structure_arrays(mesh)
+    s = structure_arrays(mesh, free_barriers=False)
     pieces = len(rigid_gauge(mesh, mesh.vertices)[0])
     return BatchSizes(
         mesh.num_vertices,
@@ -308,7 +308,7 @@ def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
     tol = np.asarray(tol)
     for ks in groups.values():
         mesh = patterns[ks[0]].mesh
-        structure = structure_arrays(mesh)
+        structure = structure_arrays(mesh, free_barriers=False)
         flat = np.stack([patterns[k].mesh.vertices for k in ks])
         start = np.stack([checked[k] for k in ks])
         # variants of one pattern (other fold angles, stiffnesses) share their geometry: its

@@ -50,7 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from origami_jax.energy import FoldParams, make_params, make_structure
+from origami_jax.energy import Barriers, FoldParams, make_params, make_structure
 from origami_jax.pattern import CreasePattern
 from origami_jax.solvers import Solver, Status, get_solver, hostsparse
 from origami_jax.solvers.base import (
@@ -259,6 +259,7 @@ def equilibrium_fn(
     tol: float | None = None,
     max_iter: int = 500,
     strict: bool = True,
+    barriers: Barriers | bool | None = None,
 ) -> Callable[[FoldParams, Array | None], tuple[Array, EquilibriumInfo]]:
     """A differentiable equilibrium of ``pattern``: ``solve(params, start=None)``.
 
@@ -278,6 +279,9 @@ def equilibrium_fn(
       max_iter: iteration limit of one solve.
       strict: make derivatives NaN when the solve is not ``info.ok`` (default). ``False`` keeps
         them (flagged by ``info`` only): the implicit derivative at a non-equilibrium.
+      barriers: as in :func:`~origami_jax.fold` (default: where the scene needs them); the
+        derivatives include theirs. The solve is direct (from ``start``): warm starts follow
+        a design's path.
 
     Returns:
       ``solve(params, start=None) -> (positions, info)``: ``params`` a
@@ -298,7 +302,7 @@ def equilibrium_fn(
     """
     solver_obj = get_solver(solver)
     mesh = pattern.mesh
-    structure = make_structure(mesh)
+    structure = make_structure(mesh, barriers)
     default_start = _default_start(pattern)
     pinned, _ = rigid_gauge(mesh, default_start)
     # the solver's host-side data (Newton: the Hessian layout), built once

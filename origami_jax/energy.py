@@ -50,11 +50,17 @@ from origami_jax.barrier import (
     HINGE_GAP,
     area_barrier,
     hinge_barrier,
+    ipc,
     rest_areas,
     signed_areas,
     triangle_normals,
 )
-from origami_jax.geometry import bar_lengths, fold_angles
+from origami_jax.geometry import (
+    bar_lengths,
+    dihedral_angles,
+    dihedral_gradients,
+    fold_angles,
+)
 from origami_jax.pattern import CreasePattern, Mesh
 
 __all__ = [
@@ -68,6 +74,8 @@ __all__ = [
     "triangle_terms",
     "update_reference",
     "barrier_distances",
+    "BarrierRows",
+    "barrier_rows",
     "springs_only",
     "hinge_goals",
     "make_structure",
@@ -117,17 +125,19 @@ NO_BARRIERS = Barriers(0.0, 0.0)
 @functools.partial(
     jax.tree_util.register_dataclass,
     data_fields=["bars", "hinges", "hinge_bars", "free", "free_bars", "triangles", "triangle_bars"],
-    meta_fields=["num_creases", "barriers"],
+    meta_fields=["num_creases", "barriers", "num_free"],
 )
 @dataclass(frozen=True)
 class Structure:
     """The static structure of a scene: index arrays only (their shapes fix the compilation).
 
     ``bars`` (E, 2); ``hinges`` (H, 4) torsion hinges ``(i, j, k, l)``, the ``num_creases``
-    driven creases first, then the facet creases; ``hinge_bars`` (H,) the bar of each hinge;
-    ``free`` (Hu, 4) hinges without a spring and their ``free_bars``, kept only to report their
-    fold angles; ``triangles`` (T, 3) and their sides' bars ``triangle_bars`` (T, 3), only with
-    an area barrier (else (0, 3)); ``barriers`` the :class:`Barriers` built.
+    driven creases first, then the facet creases, then (with a hinge barrier) the ``num_free``
+    hinges without a spring, which have only their barrier; ``hinge_bars`` (H,) the bar of
+    each hinge; ``free`` (Hu, 4) hinges without a spring or barrier and their ``free_bars``,
+    kept only to report their fold angles; ``triangles`` (T, 3) and their sides' bars
+    ``triangle_bars`` (T, 3), only with an area barrier (else (0, 3)); ``barriers`` the
+    :class:`Barriers` built.
     """
 
     bars: Array
@@ -139,10 +149,11 @@ class Structure:
     triangle_bars: Array
     num_creases: int
     barriers: Barriers = NO_BARRIERS
+    num_free: int = 0
 
     @property
     def num_facets(self) -> int:
-        return int(self.hinges.shape[0]) - self.num_creases
+        return int(self.hinges.shape[0]) - self.num_creases - self.num_free
 
 
 class Reference(NamedTuple):
@@ -214,11 +225,17 @@ def triangle_bars(mesh: Mesh) -> np.ndarray:
     return order[np.searchsorted(keys[order], side_keys)]
 
 
-def structure_arrays(mesh: Mesh, barriers: Barriers | bool | None = None) -> Structure:
-    """The index arrays of :func:`make_structure` as NumPy arrays (host side, no device copy)."""
+def structure_arrays(
+    mesh: Mesh, barriers: Barriers | bool | None = None, free_barriers: bool = True
+) -> Structure:
+    """The index arrays of :func:`make_structure` as NumPy arrays (host side, no device copy).
+    With a hinge barrier, free hinges join the torsion hinges for it (unless ``free_barriers``
+    is off: ``fold_batch`` keeps them apart)."""
     barriers = _barriers(mesh, barriers)
     driven, facet, free = (mesh.edges_with_role(r) for r in ("driven", "facet", "free"))
-    torsion = np.concatenate([driven, facet])
+    barred = free if barriers.hinge_gap > 0 and free_barriers else free[:0]
+    free = free[len(barred) :]
+    torsion = np.concatenate([driven, facet, barred])
     if barriers.area_floor > 0:
         triangles = np.asarray(mesh.triangles, np.int32).reshape(-1, 3)
         sides = triangle_bars(mesh).astype(np.int32).reshape(-1, 3)
@@ -234,6 +251,7 @@ def structure_arrays(mesh: Mesh, barriers: Barriers | bool | None = None) -> Str
         triangle_bars=sides,
         num_creases=len(driven),
         barriers=barriers,
+        num_free=len(barred),
     )
 
 
@@ -289,7 +307,7 @@ def make_params(
 def hinge_goals(structure: Structure, params: FoldParams) -> tuple[Array, Array]:
     """(H,) goal angle ``percent * target`` (0 for facets) and (H,) torsion stiffness (with the
     rest lengths' trailing batch axes, if any: see :mod:`origami_jax.geometry`)."""
-    nc, nf = structure.num_creases, structure.num_facets
+    nc, nf, nu = structure.num_creases, structure.num_facets, structure.num_free
     s, dtype = params.stiffness, params.rest_length.dtype
     trailing = params.rest_length.shape[1:]
     goals, stiffness = [], []
@@ -299,6 +317,9 @@ def hinge_goals(structure: Structure, params: FoldParams) -> tuple[Array, Array]
     if nf:
         goals.append(jnp.zeros((nf, *trailing), dtype))
         stiffness.append(jnp.broadcast_to(s.facet, (nf, *trailing)))
+    if nu:  # free hinges: no spring (only a barrier)
+        goals.append(jnp.zeros((nu, *trailing), dtype))
+        stiffness.append(jnp.zeros((nu, *trailing), dtype))
     return jnp.concatenate(goals), jnp.concatenate(stiffness)
 
 
@@ -430,6 +451,62 @@ def barrier_distances(
     if not out:
         return jnp.zeros((0, *x.shape[2:]), x.dtype)
     return jnp.concatenate(out)
+
+
+class BarrierRows(NamedTuple):
+    """The barriers of one kind at a state: their ``corners`` (n, k), ``distance`` (n,) to the
+    wall as a fraction of the active zone, the energy's ``slope`` and ``curvature`` (n,) in that
+    distance, the distance's ``gradient`` (n, k, 3) in the corners' positions, and
+    ``rounding``, the size of the distance's rounding error in units of eps (a fold angle's is
+    about pi, over the zone's width)."""
+
+    corners: Array
+    distance: Array
+    slope: Array
+    curvature: Array
+    gradient: Array
+    rounding: float
+
+
+def barrier_rows(
+    x: Array, structure: Structure, params: FoldParams, reference: Reference
+) -> list[BarrierRows]:
+    """:class:`BarrierRows` of the hinge barriers and of the area barriers a scene has (what
+    explicit dynamics stops at a wall, and what sets the rounding floor of a gradient that
+    barriers hold)."""
+    out = []
+    gap = structure.barriers.hinge_gap
+    l0 = params.rest_length
+    axial = jnp.broadcast_to(params.stiffness.axial, l0.shape)
+    if gap > 0 and structure.hinges.shape[0]:
+        q = x[structure.hinges]
+        rho = dihedral_angles(q, reference.angles)
+        d = (gap - (jnp.abs(rho) - jnp.pi)) / gap
+        weight = (axial * l0)[structure.hinge_bars]
+        grad = -(jnp.sign(rho) / gap)[:, None, None] * dihedral_gradients(q)
+        _, b1, b2 = ipc(d)
+        out.append(
+            BarrierRows(
+                structure.hinges, d, weight * gap * b1, weight * gap * b2, grad, jnp.pi / gap
+            )
+        )
+    if structure.triangles.shape[0]:
+        floor = structure.barriers.area_floor
+        sides = l0[structure.triangle_bars]
+        area0 = rest_areas(sides)
+        real = area0 > 0
+
+        def distance(p, n, a0):
+            return signed_areas(p, jnp.array([[0, 1, 2]]), n[None])[0] / (a0 * floor)
+
+        d, grad = jax.vmap(jax.value_and_grad(distance))(
+            x[structure.triangles], reference.normals, jnp.where(real, area0, 1.0)
+        )
+        d = jnp.where(real, d, 2.0)  # a padding triangle: never near a wall
+        weight = jnp.mean(axial[structure.triangle_bars] * sides, axis=1)
+        _, b1, b2 = ipc(d)
+        out.append(BarrierRows(structure.triangles, d, weight * b1, weight * b2, grad, 1.0))
+    return out
 
 
 def initial_reference(x: Array, structure: Structure, params: FoldParams) -> Reference:

@@ -138,8 +138,45 @@ class FoldResult:
         out["wall_time"], out["compile_time"] = self.wall_time, self.compile_time
         return out
 
+    @property
+    def advice(self) -> list[str]:
+        """What keeps this result from being one to trust, in words, each with what to try:
+        empty for a converged result with no crease through pi, no collapsed triangle and no
+        faces through faces."""
+        out = []
+        if not self.converged:
+            more = " or path='continuation' (the fold followed from flat)"
+            out.append(
+                "not converged: allow more time or iterations (max_time, max_iter)"
+                + (more if self.path == "direct" else "")
+            )
+        barred = self.barriers.hinge_gap > 0 and self.barriers.area_floor > 0
+        if len(self.through_pi):
+            out.append(
+                f"{len(self.through_pi)} creases folded through themselves: "
+                + ("fold with barriers=True" if not barred else "let the solve converge")
+            )
+        if len(self.collapsed):
+            out.append(
+                f"{len(self.collapsed)} triangles collapsed: "
+                + ("fold with barriers=True, " if not barred else "")
+                + "or stiffer bars (stiffness=dict(axial=...))"
+            )
+        if len(self.intersections):
+            out.append(
+                f"{len(self.intersections)} pairs of faces pass through each other: contact "
+                "between faces that share no vertex is not modelled yet"
+            )
+        if self.converged and self.fold_angle_error_max > 0.1:
+            out.append(
+                f"fold-angle error up to {np.degrees(self.fold_angle_error_max):.3g} deg at "
+                "equilibrium: the targets are not all reachable at once (not mutually "
+                "consistent); softer facets (stiffness=dict(facet=...)) let faces bend"
+            )
+        return out
+
     def summary(self) -> str:
-        """A short table: sizes, solver, iterations, times and the main errors."""
+        """A short table: sizes, solver, iterations, times, the main errors and :attr:`advice`."""
         mesh = self.pattern.mesh
         rows = [
             ("pattern", self.pattern.name),
@@ -171,6 +208,7 @@ class FoldResult:
                 shown = ", ".join("-".join(map(str, np.atleast_1d(k))) for k in found[:8])
                 shown += " ..." if len(found) > 8 else ""
                 rows.append((label, f"{len(found)} {kind}: {shown}"))
+        rows += [("advice", line) for line in self.advice]
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
@@ -431,7 +469,7 @@ def fold(
         # a given start (or a folded form's own) is where the user wants the solve to begin;
         # the first-order solvers' iterations are many already (dynamics has its own ramp)
         follows = getattr(solver_obj, "follows_path", False)
-        flat = start is None or is_planar(start)
+        flat = start is None or is_unfolded(start, mesh)
         path = "continuation" if follows and flat and needs_continuation(mesh) else "direct"
     bar = ProgressBar(max_iter) if progress else None
 
@@ -550,14 +588,17 @@ def _shifted(on_chunk, offset: int, iterations: int, sample: dict) -> None:
     on_chunk(offset + iterations, sample)
 
 
-def is_planar(x: np.ndarray) -> bool:
-    """Whether positions ``x`` (V, 3) lie in one plane, to 1e-9 of their extent: a flat sheet
-    however it is placed (a FOLD file drawn in the x-z plane, say)."""
-    centred = x - x.mean(axis=0)
-    extent = float(np.max(np.linalg.norm(centred, axis=1), initial=0.0))
-    if extent == 0.0:
-        return True
-    return float(np.linalg.svd(centred, compute_uv=False)[-1]) <= 1e-9 * extent * np.sqrt(len(x))
+def is_unfolded(x: np.ndarray, mesh) -> bool:
+    """Whether positions ``x`` (V, 3) are the flat, unfolded sheet, however it is placed (a FOLD
+    file drawn in the x-z plane, say): every triangle's normal the same, to 1e-9. A sheet folded
+    flat is planar too, but half its triangles face the other way."""
+    p = np.asarray(x, np.float64)[mesh.triangles]
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    if not np.all(norm > 0):
+        return False
+    n = n / norm
+    return bool(np.min(n @ n[0]) >= 1.0 - 1e-9)
 
 
 def needs_continuation(mesh) -> bool:
@@ -632,7 +673,9 @@ def _solve_path(
                     **sample,
                     "iteration": iterations + sample["iteration"],
                     "wall_time": spent + sample["wall_time"],
-                    "grad_norm_rel": sample["grad_norm_rel"] * float(state.grad_max0) / grad_ref,
+                    "grad_norm_rel": sample["grad_norm_rel"]
+                    * float(state.grad_max0)
+                    / (grad_ref if grad_ref > 0 else 1.0),
                 }
             )
         iterations += steps
@@ -648,9 +691,11 @@ def _solve_path(
             x = np.asarray(xk, np.float64)
             reference = state.reference
             done = fraction
-            frames.append(
-                Frame(float(full) * min(fraction, 1.0), x, np.asarray(angles_k, np.float64))
-            )
+            frame = Frame(float(full) * min(fraction, 1.0), x, np.asarray(angles_k, np.float64))
+            if fraction > 1.0:  # stiffening at full percent: one frame, the latest state
+                frames[-1] = frame
+            else:
+                frames.append(frame)
             if last or spent_all:
                 break
             # grow only after two easy steps in a row: a step just halved would fail again

@@ -60,7 +60,8 @@ def position_metrics(
             out["fold_angle_error_max"] = jnp.max(err[: s.num_creases])
             out["fold_angle_error_mean"] = jnp.mean(err[: s.num_creases])
         if s.num_facets:
-            out["facet_angle_error_max"] = jnp.max(err[s.num_creases :])
+            facets = err[s.num_creases : s.num_creases + s.num_facets]
+            out["facet_angle_error_max"] = jnp.max(facets)
     out["energy"] = energy(x, s, p, reference)
     return out
 

@@ -884,8 +884,9 @@ def animate_fold(
         ``imageio-ffmpeg`` package); written atomically.
       frames: a number of frames, folded by continuation in fold percent (see
         :func:`fold_frames`, ``solver`` and ``fold_kwargs`` go to :func:`~origami_jax.fold`),
-        or precomputed frames: results of :func:`fold_frames` or (V, 3) position arrays (e.g.
-        a dynamics trajectory).
+        or precomputed frames: results of :func:`fold_frames`, a fold's path
+        (``fold(...).frames``, the states it followed from flat) or (V, 3) position arrays
+        (e.g. a dynamics trajectory).
       fps: frames per second.
       color: ``None``, ``"strain"`` or ``"fold_angle_error"`` (against each frame's percent,
         one colour scale for all frames).
@@ -914,12 +915,10 @@ def animate_fold(
         frames = list(frames)
         if not frames:
             raise ValueError("frames: empty")
-        positions = [
-            _mesh_positions(f.positions if isinstance(f, FoldResult) else f, pattern)
-            for f in frames
-        ]
-        percents = None  # known for results only: titled by percent, else by frame number
-        if all(isinstance(f, FoldResult) for f in frames):
+        # results and a fold's path frames (``result.frames``) carry positions and a percent
+        positions = [_mesh_positions(getattr(f, "positions", f), pattern) for f in frames]
+        percents = None  # known for results and path frames: titled by percent, else by number
+        if all(hasattr(f, "percent") for f in frames):
             percents = np.array([f.percent for f in frames])
         values = None
         cm = colormaps[cmap]

@@ -9,7 +9,7 @@ import pytest
 from origami_jax import CreasePattern, fold, io, patterns
 from origami_jax.barrier import HINGE_GAP
 from origami_jax.energy import Barriers
-from origami_jax.fold import PATH_END, is_planar
+from origami_jax.fold import PATH_END, is_unfolded
 from origami_jax.kinematics import rigid_fold
 
 
@@ -64,9 +64,12 @@ def test_a_start_in_a_tilted_plane_counts_as_flat():
     cp = patterns.single_crease(fold_angle=np.pi)
     x = cp.mesh.vertices
     turned = x @ np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # the sheet in the x-z plane
-    assert is_planar(turned) and not is_planar(rigid_fold(cp, 0.5 * cp.mesh.target))
+    half = rigid_fold(cp, 0.5 * cp.mesh.target)
+    assert is_unfolded(turned, cp.mesh) and not is_unfolded(half, cp.mesh)
+    # folded flat: planar, but not the unfolded sheet
+    assert not is_unfolded(rigid_fold(cp, cp.mesh.target), cp.mesh)
     assert fold(cp, start=turned).path == "continuation"
-    assert fold(cp, start=rigid_fold(cp, 0.5 * cp.mesh.target)).path == "direct"
+    assert fold(cp, start=half).path == "direct"
 
 
 FLAT_FOLDABLE = {

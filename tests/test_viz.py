@@ -208,6 +208,20 @@ def test_animate_fold_gif_frames(result, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fold.gif", "given.gif"]
 
 
+def test_animate_a_fold_path(tmp_path):
+    """The states a fold followed from flat (``result.frames``) animate as they are."""
+    from PIL import Image
+
+    cp = patterns.single_crease(fold_angle=np.pi)
+    folded = fold(cp)
+    assert folded.path == "continuation" and len(folded.frames) >= 3
+    path = tmp_path / "path.gif"
+    shown = viz.animate_fold(cp, path, frames=folded.frames, dpi=40, figsize=(3, 2.5))
+    with Image.open(path) as im:
+        assert im.n_frames == len(folded.frames)
+    np.testing.assert_array_equal(shown[-1], folded.positions)
+
+
 def test_mp4_with_imageio_ffmpeg(result, tmp_path):
     pytest.importorskip("imageio_ffmpeg")
     path = tmp_path / "fold.mp4"

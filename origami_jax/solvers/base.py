@@ -18,13 +18,15 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from origami_jax.barrier import S_MIN, rest_areas, signed_areas
+from origami_jax.barrier import S_MIN
 from origami_jax.energy import (
     FoldParams,
     Reference,
     Structure,
     barrier_distances,
+    barrier_rows,
     energy,
+    hinge_terms,
     initial_reference,
     springs_only,
 )
@@ -41,6 +43,7 @@ __all__ = [
     "has_barriers",
     "tolerance_scale",
     "stop_closing",
+    "element_floor",
     "barrier_limit",
     "prepare",
     "check_start",
@@ -144,13 +147,19 @@ def gradient_floor(problem: Problem) -> Array:
 
 
 def has_converged(
-    grad_max: Array, grad_max0: Array, problem: Problem, previous: Array | None = None
+    grad_max: Array,
+    grad_max0: Array,
+    problem: Problem,
+    previous: Array | None = None,
+    floor: Array | float = 0.0,
 ) -> Array:
     """``grad_norm_rel <= tol``, or the gradient is down to its rounding noise (with
     ``previous``, the last iterate's ``grad_max``: there too, for a method whose step still
     gains there, as Newton's does: measured, one more Newton step from the floor took a stiff
-    Miura-ori from 4.4e-9 to 3.5e-11 rad, a float32 one from 1.1e-4 to 3.6e-7 rad)."""
-    floor = gradient_floor(problem)
+    Miura-ori from 4.4e-9 to 3.5e-11 rad, a float32 one from 1.1e-4 to 3.6e-7 rad).
+    ``floor``: a further rounding floor to add (the hinges' and barriers':
+    :func:`element_floor`)."""
+    floor = gradient_floor(problem) + floor
     at_floor = grad_max <= floor
     if previous is not None:
         at_floor = at_floor & (previous <= floor)
@@ -372,34 +381,40 @@ def stop_closing(v: Array, x: Array, problem: Problem, reference: Reference) -> 
     they would close, their component along that barrier's distance gradient: an inelastic
     stop at the wall, local to the barrier's corners (for explicit dynamics, whose step no
     barrier's unbounded stiffness allows)."""
-    structure = problem.structure
     out = v
-    gap = structure.barriers.hinge_gap
-    if gap > 0 and structure.hinges.shape[0]:
-        q = x[structure.hinges]
-        rho = dihedral_angles(q, reference.angles)
-        grad = -(jnp.sign(rho) / gap)[:, None, None] * dihedral_gradients(q)
-        out = _remove_closing(out, v, structure.hinges, (gap - (jnp.abs(rho) - jnp.pi)) / gap, grad)
-    if structure.triangles.shape[0]:
-        floor = structure.barriers.area_floor
-
-        def ratio(p, n, area0):
-            return signed_areas(p, jnp.array([[0, 1, 2]]), n[None])[0] / (area0 * floor)
-
-        area0 = rest_areas(problem.params.rest_length[structure.triangle_bars])
-        real = area0 > 0
-        d, grad = jax.vmap(jax.value_and_grad(ratio))(
-            x[structure.triangles], reference.normals, jnp.where(real, area0, 1.0)
-        )
-        out = _remove_closing(out, v, structure.triangles, jnp.where(real, d, 2.0), grad)
+    for rows in barrier_rows(x, problem.structure, problem.params, reference):
+        grad = rows.gradient
+        rate = jnp.sum(grad * v[rows.corners], axis=(1, 2))
+        norm2 = jnp.sum(grad * grad, axis=(1, 2))
+        closing = (rows.distance < 1.0) & (rate < 0) & (norm2 > 0)
+        scale = jnp.where(closing, rate / jnp.where(norm2 > 0, norm2, 1.0), 0.0)
+        out = out.at[rows.corners].add(-scale[:, None, None] * grad)
     return out
 
 
-def _remove_closing(out: Array, v: Array, corners: Array, d: Array, grad: Array) -> Array:
-    """``out`` less each closing active barrier's (``d < 1``, rate ``grad . v < 0``) velocity
-    component along its gradient ``grad`` (n, k, 3) over its ``corners`` (n, k)."""
-    rate = jnp.sum(grad * v[corners], axis=(1, 2))
-    norm2 = jnp.sum(grad * grad, axis=(1, 2))
-    closing = (d < 1.0) & (rate < 0) & (norm2 > 0)
-    scale = jnp.where(closing, rate / jnp.where(norm2 > 0, norm2, 1.0), 0.0)
-    return out.at[corners].add(-scale[:, None, None] * grad)
+def element_floor(x: Array, problem: Problem, reference: Reference) -> Array:
+    """Eps times the largest root-sum-square, over a vertex's hinges and barriers, of the
+    rounding of their force on it: the force's size, and its change over the rounding of the
+    element's angle or distance (its curvature times that rounding: a fold angle's is about
+    eps times the coordinates' size over its wing's altitude, large at a sliver; a barrier's
+    curvature is large near its wall). Newton counts it in scenes with barriers, where creases
+    folded flat and barriers holding them put the gradient's rounding above the bars' alone
+    (:func:`gradient_floor`)."""
+    eps = jnp.finfo(x.dtype).eps
+    force = jnp.zeros(x.shape[:1] + x.shape[2:], x.dtype)
+    structure, params = problem.structure, problem.params
+    if structure.hinges.shape[0]:
+        q = x[structure.hinges]
+        g = dihedral_gradients(q)
+        _, d1, d2 = hinge_terms(dihedral_angles(q, reference.angles), structure, params)
+        size = jnp.sqrt(jnp.sum(g * g, axis=2))
+        rounding = jnp.max(jnp.abs(x), axis=(0, 1)) * jnp.max(size, axis=1)
+        spread = (jnp.abs(d1) + jnp.abs(d2) * rounding)[:, None] * size
+        force = force.at[structure.hinges].add(spread * spread)
+    for rows in barrier_rows(x, structure, params, reference):
+        if rows.corners.shape[1] == 4:  # the hinges' barriers: in their terms above
+            continue
+        size = jnp.sqrt(jnp.sum(rows.gradient**2, axis=2))  # (n, 3)
+        spread = jnp.abs(rows.slope) + rows.rounding * jnp.abs(rows.curvature)
+        force = force.at[rows.corners].add((spread[:, None] * size) ** 2)
+    return eps * jnp.sqrt(jnp.max(force, axis=0))

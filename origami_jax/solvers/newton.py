@@ -96,6 +96,7 @@ from origami_jax.solvers.base import (
     Progress,
     Status,
     barrier_limit,
+    element_floor,
     gauge,
     has_barriers,
     has_converged,
@@ -1252,7 +1253,10 @@ class Newton:
         cooldown = jnp.where(rejected, 2 ** jnp.minimum(failures, 4) - 1, s.cooldown)
         cooldown = jnp.where(take & full, jnp.maximum(cooldown - 1, 0), cooldown)
         progress = s.progress.update(take, gmax, new_value, noise)
-        converged = take & has_converged(gmax, s.grad_max0, problem, s.grad_max)
+        floor = 0.0
+        if has_barriers(problem.structure):  # folded flat, held by barriers: their rounding
+            floor = element_floor(positions(problem, u), problem, s.reference)
+        converged = take & has_converged(gmax, s.grad_max0, problem, s.grad_max, floor)
         stalled = (stalls >= self.max_stalls) | (progress.since_best >= self.patience)
         nonfinite = accepted & ~finite
         status = next_status(converged, ~nonfinite, stalled)
