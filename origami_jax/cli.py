@@ -59,6 +59,20 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--float32", action="store_true", help="solve in float32 (default float64)")
     f.add_argument("--quiet", action="store_true", help="no progress bar")
     f.add_argument(
+        "--path",
+        choices=("auto", "direct", "continuation"),
+        default="auto",
+        help="follow the fold from flat (continuation) or solve directly; auto (default): "
+        "from flat where a crease folds fully",
+    )
+    f.add_argument(
+        "--barriers",
+        choices=("auto", "on", "off"),
+        default="auto",
+        help="hinge and area barriers (no crease through itself, no collapsed triangle); "
+        "auto (default): where a crease folds fully",
+    )
+    f.add_argument(
         "--cache",
         action="store_true",
         help="keep compiled code in a persistent cache (faster next runs; see the module doc)",
@@ -227,6 +241,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             max_time=args.max_time,
             dtype=jnp.float32 if args.float32 else jnp.float64,
             progress=not args.quiet,
+            path=args.path,
+            barriers={"auto": None, "on": True, "off": False}[args.barriers],
         )
         io.save(out, result)
     except (PatternError, ValueError, OSError) as exc:

@@ -369,6 +369,15 @@ def residuals(
     return jnp.concatenate(r), jnp.concatenate(w)
 
 
+def barrier_weights(structure: Structure, params: FoldParams) -> tuple[Array, Array]:
+    """The barriers' weights: (H,) each hinge's bar's ``axial * l0`` and (T,) each barrier
+    triangle's mean over its sides (the scale of a bar's energy at a strain of one: what pushes
+    a crease through itself or crushes a triangle is the sheet's bars)."""
+    l0 = params.rest_length
+    work = jnp.broadcast_to(params.stiffness.axial, l0.shape) * l0
+    return work[structure.hinge_bars], jnp.mean(work[structure.triangle_bars], axis=1)
+
+
 def hinge_terms(rho: Array, structure: Structure, params: FoldParams) -> tuple[Array, Array, Array]:
     """Per torsion hinge: its energy (spring and, if built, barrier) and that energy's first and
     second derivatives in the fold angle ``rho`` (radians). The barrier's weight is its bar's
@@ -379,10 +388,7 @@ def hinge_terms(rho: Array, structure: Structure, params: FoldParams) -> tuple[A
     e, d1, d2 = 0.5 * weight * diff * diff, weight * diff, weight
     gap = structure.barriers.hinge_gap
     if gap > 0:
-        l0 = params.rest_length
-        axial = jnp.broadcast_to(params.stiffness.axial, l0.shape)
-        bars = structure.hinge_bars
-        b, b1, b2 = hinge_barrier(rho, (axial * l0)[bars], gap)
+        b, b1, b2 = hinge_barrier(rho, barrier_weights(structure, params)[0], gap)
         e, d1, d2 = e + b, d1 + b1, d2 + b2
     return e, d1, d2
 
@@ -395,11 +401,10 @@ def triangle_terms(
     l0 = params.rest_length
     sides = l0[structure.triangle_bars]  # (T, 3)
     area0 = rest_areas(sides)
-    real = area0 > 0  # a padding triangle has no rest area (and no weight)
+    real = area0 > 0  # a triangle with no rest area (degenerate) gets no barrier
     ratio = signed_areas(x, structure.triangles, normals) / jnp.where(real, area0, 1.0)
     ratio = jnp.where(real, ratio, 1.0)
-    axial = jnp.broadcast_to(params.stiffness.axial, l0.shape)[structure.triangle_bars]
-    weight = jnp.mean(axial * sides, axis=1)
+    weight = barrier_weights(structure, params)[1]
     e, d1, d2 = area_barrier(ratio, weight, structure.barriers.area_floor)
     return ratio, e, d1, d2
 
@@ -477,12 +482,11 @@ def barrier_rows(
     out = []
     gap = structure.barriers.hinge_gap
     l0 = params.rest_length
-    axial = jnp.broadcast_to(params.stiffness.axial, l0.shape)
     if gap > 0 and structure.hinges.shape[0]:
         q = x[structure.hinges]
         rho = dihedral_angles(q, reference.angles)
         d = (gap - (jnp.abs(rho) - jnp.pi)) / gap
-        weight = (axial * l0)[structure.hinge_bars]
+        weight = barrier_weights(structure, params)[0]
         grad = -(jnp.sign(rho) / gap)[:, None, None] * dihedral_gradients(q)
         _, b1, b2 = ipc(d)
         out.append(
@@ -503,7 +507,7 @@ def barrier_rows(
             x[structure.triangles], reference.normals, jnp.where(real, area0, 1.0)
         )
         d = jnp.where(real, d, 2.0)  # a padding triangle: never near a wall
-        weight = jnp.mean(axial[structure.triangle_bars] * sides, axis=1)
+        weight = barrier_weights(structure, params)[1]
         _, b1, b2 = ipc(d)
         out.append(BarrierRows(structure.triangles, d, weight * b1, weight * b2, grad, 1.0))
     return out

@@ -471,10 +471,12 @@ def fold(
         follows = getattr(solver_obj, "follows_path", False)
         flat = start is None or is_unfolded(start, mesh)
         path = "continuation" if follows and flat and needs_continuation(mesh) else "direct"
-    bar = ProgressBar(max_iter) if progress else None
+    bars: list[ProgressBar] = []  # made at the first chunk: its clock starts after compiling
 
     def on_chunk(iterations, sample):
-        if bar is not None:
+        if progress and not bars:
+            bars.append(ProgressBar(max_iter))
+        for bar in bars:
             bar.update(iterations, f"err {float(sample['fold_angle_error_max']):.2e} rad")
 
     if path == "continuation":
@@ -511,7 +513,7 @@ def fold(
             [],
         )
     state, m, x, angles, samples, out_of_time, iterations, compile_time, wall_time, frames = solved
-    if bar is not None:
+    for bar in bars:
         bar.close()
 
     status = Status(int(state.status))
@@ -581,7 +583,6 @@ PATH_STEP_ITERATIONS = 200
 PATH_EASY_ITERATIONS = 20
 PATH_SOFT_AXIAL = 30.0
 PATH_END = 2.0
-_DEBUG = __import__("os").environ.get("OJ_DEBUG")
 
 
 def _shifted(on_chunk, offset: int, iterations: int, sample: dict) -> None:
@@ -682,11 +683,6 @@ def _solve_path(
         converged = int(state.status) == Status.CONVERGED
         jump = float(np.max(np.abs(angles_k - frames[-1].fold_angles), initial=0.0))
         spent_all = out_of_time or iterations >= max_iter
-        if _DEBUG:
-            print(
-                f"t={fraction:.4f} step={step:.4f} it={steps} status={int(state.status)} "
-                f"jump={jump:.3f} g={float(state.grad_max):.2e}/{float(state.grad_max0):.2e}"
-            )
         if (converged and jump <= PATH_JUMP) or step <= PATH_MIN_STEP or spent_all:
             x = np.asarray(xk, np.float64)
             reference = state.reference

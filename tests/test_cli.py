@@ -39,6 +39,21 @@ def test_fold_file_input_and_mesh_output(tmp_path, capsys):
     assert "single_crease" in capsys.readouterr().out
 
 
+def test_fold_path_and_barriers_options(tmp_path, capsys):
+    from origami_jax import patterns
+
+    src = tmp_path / "full.fold"
+    oio.save(src, patterns.single_crease(fold_angle=np.pi))
+    out = tmp_path / "out.fold"
+    assert main(["fold", str(src), "--out", str(out), "--quiet"]) == 0
+    frames = __import__("json").loads(out.read_text())["file_frames"]
+    assert len(frames) > 2  # the path from flat, written frame by frame
+    argv = ["fold", str(src), "--out", str(out), "--quiet", "--path", "direct"]
+    assert main([*argv, "--barriers", "off"]) == 0
+    assert len(__import__("json").loads(out.read_text())["file_frames"]) == 1
+    capsys.readouterr()
+
+
 def test_time_limit_exits_1_with_reason(tmp_path, capsys):
     out = tmp_path / "crease.fold"
     argv = ["fold", "--example", "single_crease", "--out", str(out), "--quiet", "--max-time", "0"]
