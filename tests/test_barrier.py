@@ -213,3 +213,27 @@ def test_design_gradient_through_an_active_hinge_barrier():
     # here: the barrier's stiffness changes fast across its zone
     fd = (4 * central(5e-5) - central(1e-4)) / 3
     assert abs(float(g[0]) - fd) <= 1e-6 * abs(fd), (g, fd)
+
+
+def test_free_hinges_get_the_hinge_barrier_only():
+    """A hinge without a spring (``U``) has no energy until it is folded through itself."""
+    from origami_jax import CreasePattern
+
+    cp = CreasePattern(
+        vertices=[[0, 0], [1, 0], [1, 1], [0, 1]],
+        edges=[[0, 1], [1, 2], [2, 3], [3, 0], [0, 2]],
+        faces=[[0, 1, 2], [0, 2, 3]],
+        assignments="BBBBU",
+    )
+    barred = make_structure(cp.mesh, Barriers(hinge_gap=0.5, area_floor=0.25))
+    plain = make_structure(cp.mesh, False)
+    assert barred.num_free == 1 and barred.free.shape[0] == 0 and barred.num_facets == 0
+    assert plain.num_free == 0 and plain.free.shape[0] == 1 and plain.hinges.shape[0] == 0
+    params = make_params(cp)
+    k = cp.mesh.edges_with_role("free")[0]
+    for angle, active in ((2.0, False), (np.pi + 0.25, True)):
+        x = jnp.asarray(rigid_fold(cp, np.where(np.arange(cp.mesh.num_edges) == k, angle, 0.0)))
+        ref = initial_reference(x, barred, params)._replace(angles=jnp.array([angle]))
+        e = float(energy(x, barred, params, ref))
+        assert (e > 1e-12) == active, (angle, e)
+        assert float(energy(x, plain, params)) < 1e-20
