@@ -13,8 +13,8 @@ Importing the package changes no global JAX setting; enable float64 yourself wit
 
 from origami_jax import patterns
 from origami_jax.batch import fold_batch
-from origami_jax.energy import FoldParams, Stiffness, build_energy, energy
-from origami_jax.fold import FoldResult, fold
+from origami_jax.energy import Barriers, FoldParams, Stiffness, build_energy, energy
+from origami_jax.fold import FoldResult, Frame, fold
 from origami_jax.io import from_fold_dict, load, save, to_fold_dict
 from origami_jax.pattern import ASSIGNMENTS, CreasePattern, Mesh, PatternError, PatternWarning
 
@@ -26,9 +26,11 @@ __all__ = [
     "PatternWarning",
     "FoldParams",
     "Stiffness",
+    "Barriers",
     "build_energy",
     "energy",
     "FoldResult",
+    "Frame",
     "fold",
     "fold_batch",
     "load",

@@ -77,7 +77,10 @@ class FoldResult:
     ``fold_angles`` (E,): per mesh edge, radians (pattern edges first, then triangulation edges;
     0 on borders), unwrapped, so ``|angle| > pi`` means a crease folded through itself;
     ``history``: arrays over samples, ``wall_time`` from the start of the solve (compile time
-    excluded) with ``fold_angle_error_max``, ``strain_max``, ``energy``, ``grad_norm_rel``.
+    excluded) with ``fold_angle_error_max``, ``strain_max``, ``energy``, ``grad_norm_rel``;
+    ``path``: ``"direct"`` or ``"continuation"``; ``barriers``: the :class:`Barriers` built;
+    ``frames``: with continuation, the states of the path from flat (:class:`Frame`, one per
+    fold percent, the last the result).
     Units: radians, seconds, the pattern's length unit.
     """
 
@@ -429,6 +432,14 @@ def fold(
       record_every: record a ``history`` sample every this many iterations (default: chunks
         that grow to about a tenth of a second each, which costs the solve nothing measurable;
         ``1`` resolves each Newton iteration, at one host round trip per sample).
+      barriers: the hinge and area barriers of :mod:`origami_jax.barrier` (no crease through
+        itself, no collapsed triangle): ``None`` (default) where a crease is driven to 0.9 pi
+        or more (:func:`~origami_jax.energy.needs_barriers`), ``True``, ``False`` or an
+        :class:`~origami_jax.energy.Barriers`.
+      path: ``"continuation"``: follow the fold from flat, the fold percent raised in adaptive
+        steps (the states in ``result.frames``); ``"direct"``: one solve at the full percent;
+        ``"auto"`` (default): continuation with Newton where the scene has barriers by default
+        and the start is the unfolded sheet, else direct.
 
     Returns:
       A :class:`FoldResult`; it never holds NaN positions: a solve that meets a non-finite value
@@ -615,8 +626,14 @@ def _solve_path(
     started from the last one's state (positions and reference), as paper is folded and as
     Origami Simulator's percent slider does. A step that does not converge, or in which some
     crease turns by more than :data:`PATH_JUMP` (a jump to another branch), is retried at half
-    the size; a converged step lets the next grow. The tolerance is relative to the gradient
-    at the start fully driven, like a direct solve's."""
+    the size; two easy steps in a row let the next grow.
+
+    On the way the bars and facets are soft, in Origami Simulator's ratios to the crease
+    (:data:`PATH_SOFT_AXIAL`, facets as the crease: a sheet that cannot fold rigidly bends and
+    stretches instead of folding creases the wrong way); at full percent a second stretch of
+    the path (to :data:`PATH_END`) stiffens them back to the user's, so the result is the
+    equilibrium of the model asked for. The tolerance is relative to the gradient at the start
+    fully driven, like a direct solve's; the intermediate steps stop at :data:`PATH_TOL`."""
     dtype = params.rest_length.dtype
     full = params.percent
     x = np.asarray(mesh.vertices if start is None else start, np.float64)
@@ -624,8 +641,11 @@ def _solve_path(
 
     k = params.stiffness
     crease = jnp.mean(k.crease)
-    soft_axial = jnp.minimum(1.0, PATH_SOFT_AXIAL * crease / jnp.mean(k.axial))
-    soft_facet = jnp.minimum(1.0, crease / jnp.mean(k.facet))
+    # softer only, never stiffer, and not at all without creases' stiffness to measure by
+    soft_axial = jnp.where(
+        crease > 0, jnp.minimum(1.0, PATH_SOFT_AXIAL * crease / jnp.mean(k.axial)), 1.0
+    )
+    soft_facet = jnp.where(crease > 0, jnp.minimum(1.0, crease / jnp.mean(k.facet)), 1.0)
 
     def problem_at(t, x, reference):
         # t in [0, 1]: the fold percent raised at soft stiffness; t in [1, 2]: the stiffness
