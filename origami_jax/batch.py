@@ -66,6 +66,7 @@ from origami_jax.energy import (
     Barriers,
     FoldParams,
     Stiffness,
+    needs_barriers,
     rest_lengths,
     stiffness_arrays,
     structure_arrays,
@@ -303,7 +304,9 @@ def _members(patterns, percents, stiffnesses, starts, tol) -> list[_Member]:
     for k, cp in enumerate(patterns):
         mesh = cp.mesh
         arrays = (mesh.triangles, mesh.edges, mesh.role)
-        groups.setdefault((mesh.num_vertices, *(a.tobytes() for a in arrays)), []).append(k)
+        # the barriers a pattern needs depend on its targets: a key of their own
+        key = (mesh.num_vertices, needs_barriers(mesh), *(a.tobytes() for a in arrays))
+        groups.setdefault(key, []).append(k)
     members: list = [None] * n
     tol = np.asarray(tol)
     for ks in groups.values():

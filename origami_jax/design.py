@@ -50,7 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from origami_jax.energy import Barriers, FoldParams, make_params, make_structure
+from origami_jax.energy import Barriers, FoldParams, Reference, make_params, make_structure
 from origami_jax.pattern import CreasePattern
 from origami_jax.solvers import Solver, Status, get_solver, hostsparse
 from origami_jax.solvers.base import (
@@ -118,7 +118,7 @@ class EquilibriumInfo(NamedTuple):
 # -- the equilibrium and its implicit derivative --------------------------------------------------
 
 
-def _hessian_values(problem: Problem, u: Array, reference: Array) -> Array:
+def _hessian_values(problem: Problem, u: Array, reference: Reference) -> Array:
     """Storage values of the gauged exact Hessian d^2E/du^2 in the solver's layout, with a
     stiffness-sized identity on the pinned (gauged-out) directions."""
     return gauged_hessian(positions(problem, u), problem, reference, True)
@@ -179,7 +179,9 @@ def _linear_solve(problem: Problem, factor: Array, rhs: Array) -> Array:
 
 
 @jax.custom_jvp
-def _implicit(params: FoldParams, u: Array, reference: Array, factor: Array, scale: Array, problem):
+def _implicit(
+    params: FoldParams, u: Array, reference: Reference, factor: Array, scale: Array, problem
+):
     """Positions ``start + gauge(u)`` of the equilibrium ``u`` of ``params`` (primal: no work).
 
     Its JVP is the implicit derivative; ``scale`` (1, or NaN when the solve is not usable)

@@ -461,16 +461,13 @@ def barrier_distances(
 class BarrierRows(NamedTuple):
     """The barriers of one kind at a state: their ``corners`` (n, k), ``distance`` (n,) to the
     wall as a fraction of the active zone, the energy's ``slope`` and ``curvature`` (n,) in that
-    distance, the distance's ``gradient`` (n, k, 3) in the corners' positions, and
-    ``rounding``, the size of the distance's rounding error in units of eps (a fold angle's is
-    about pi, over the zone's width)."""
+    distance, and the distance's ``gradient`` (n, k, 3) in the corners' positions."""
 
     corners: Array
     distance: Array
     slope: Array
     curvature: Array
     gradient: Array
-    rounding: float
 
 
 def barrier_rows(
@@ -489,11 +486,7 @@ def barrier_rows(
         weight = barrier_weights(structure, params)[0]
         grad = -(jnp.sign(rho) / gap)[:, None, None] * dihedral_gradients(q)
         _, b1, b2 = ipc(d)
-        out.append(
-            BarrierRows(
-                structure.hinges, d, weight * gap * b1, weight * gap * b2, grad, jnp.pi / gap
-            )
-        )
+        out.append(BarrierRows(structure.hinges, d, weight * gap * b1, weight * gap * b2, grad))
     if structure.triangles.shape[0]:
         floor = structure.barriers.area_floor
         sides = l0[structure.triangle_bars]
@@ -509,7 +502,7 @@ def barrier_rows(
         d = jnp.where(real, d, 2.0)  # a padding triangle: never near a wall
         weight = barrier_weights(structure, params)[1]
         _, b1, b2 = ipc(d)
-        out.append(BarrierRows(structure.triangles, d, weight * b1, weight * b2, grad, 1.0))
+        out.append(BarrierRows(structure.triangles, d, weight * b1, weight * b2, grad))
     return out
 
 
@@ -531,10 +524,13 @@ def _toward(structure: Structure, params: FoldParams) -> Array:
 
 def update_reference(x: Array, structure: Structure, reference: Reference) -> Reference:
     """The :class:`Reference` at an accepted iterate ``x``, from the last one: each hinge's
-    angle followed continuously, each triangle's current normal."""
+    angle followed continuously, each triangle's current normal turned to the side of its last
+    (a triangle turned over stays turned over, and its barrier keeps pushing it back)."""
+    normals = triangle_normals(x, structure.triangles)
+    side = jnp.sum(normals * reference.normals, axis=1, keepdims=True)
     return Reference(
         fold_angles(x, structure.hinges, reference.angles),
-        triangle_normals(x, structure.triangles),
+        jnp.where(side < 0, -normals, normals),
     )
 
 

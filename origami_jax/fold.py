@@ -19,6 +19,7 @@ import numpy as np
 
 from origami_jax.barrier import HINGE_GAP
 from origami_jax.energy import (
+    NO_BARRIERS,
     Barriers,
     FoldParams,
     Stiffness,
@@ -78,6 +79,8 @@ class FoldResult:
     0 on borders), unwrapped, so ``|angle| > pi`` means a crease folded through itself;
     ``history``: arrays over samples, ``wall_time`` from the start of the solve (compile time
     excluded) with ``fold_angle_error_max``, ``strain_max``, ``energy``, ``grad_norm_rel``;
+    along a continuation path the samples are each step's, measured against that step's fold
+    percent and stiffness (a step retried smaller included), then the result's;
     ``path``: ``"direct"`` or ``"continuation"``; ``barriers``: the :class:`Barriers` built;
     ``frames``: with continuation, the states of the path from flat (:class:`Frame`, one per
     fold percent, the last the result).
@@ -106,10 +109,10 @@ class FoldResult:
     shape_error: float | None = None
     history: dict[str, np.ndarray] = field(default_factory=dict)
     path: str = "direct"
-    barriers: Barriers = field(default_factory=lambda: Barriers(0.0, 0.0))
+    barriers: Barriers = NO_BARRIERS
     frames: list = field(default_factory=list)
 
-    @property
+    @functools.cached_property
     def through_pi(self) -> np.ndarray:
         """Mesh edges whose crease folded through itself (unwrapped ``|angle|`` more than
         :data:`~origami_jax.barrier.HINGE_GAP`, 1e-5 rad, past ``pi``: a crease held at its
@@ -117,13 +120,13 @@ class FoldResult:
         passed through the paper there. Empty for a physical result."""
         return np.flatnonzero(np.abs(self.fold_angles) > np.pi + HINGE_GAP)
 
-    @property
+    @functools.cached_property
     def collapsed(self) -> np.ndarray:
         """Mesh triangles squeezed below 1e-6 of their flat area, the smallest first (see
         :func:`~origami_jax.metrics.collapsed_triangles`). Empty for a physical result."""
         return collapsed_triangles(self.positions, self.pattern.mesh)[0]
 
-    @property
+    @functools.cached_property
     def intersections(self) -> np.ndarray:
         """(K, 2) pairs of mesh triangles sharing no vertex that cross each other deeper than
         1e-6 of the diameter (see :func:`~origami_jax.intersections.intersecting_pairs`): the
@@ -632,8 +635,9 @@ def _solve_path(
     (:data:`PATH_SOFT_AXIAL`, facets as the crease: a sheet that cannot fold rigidly bends and
     stretches instead of folding creases the wrong way); at full percent a second stretch of
     the path (to :data:`PATH_END`) stiffens them back to the user's, so the result is the
-    equilibrium of the model asked for. The tolerance is relative to the gradient at the start
-    fully driven, like a direct solve's; the intermediate steps stop at :data:`PATH_TOL`."""
+    equilibrium of the model asked for. The tolerance is relative to the gradient at the flat
+    start fully driven (the creases' alone there, as a direct solve's); the intermediate steps
+    stop at :data:`PATH_TOL`."""
     dtype = params.rest_length.dtype
     full = params.percent
     x = np.asarray(mesh.vertices if start is None else start, np.float64)
@@ -663,6 +667,7 @@ def _solve_path(
     grad_ref = float(first.grad_max0)
     frames = [Frame(0.0, x, np.asarray(angles, np.float64))]
     samples = [_sample(first, m, 0.0)]  # the start, fully driven, as a direct solve's
+    watched = np.asarray(structure.hinge_bars)[: structure.num_creases + structure.num_facets]
     done, step, iterations, calm = 0.0, PATH_FIRST_STEP, 0, True
     while True:
         fraction = min(PATH_END, done + step)
@@ -701,20 +706,27 @@ def _solve_path(
             )
         iterations += steps
         converged = int(state.status) == Status.CONVERGED
-        jump = float(np.max(np.abs(angles_k - frames[-1].fold_angles), initial=0.0))
+        # a jump: a crease or facet (not a free hinge, which may swing) turning far in a step
+        turned = np.abs(angles_k - frames[-1].fold_angles)[watched]
+        jump = float(np.max(turned, initial=0.0))
         spent_all = out_of_time or iterations >= max_iter
         if (converged and jump <= PATH_JUMP) or step <= PATH_MIN_STEP or spent_all:
             x = np.asarray(xk, np.float64)
             reference = state.reference
             done = fraction
             frame = Frame(float(full) * min(fraction, 1.0), x, np.asarray(angles_k, np.float64))
-            if fraction > 1.0:  # stiffening at full percent: one frame, the latest state
-                frames[-1] = frame
+            if fraction > 1.0 and frames[-1].percent == frame.percent:
+                frames[-1] = frame  # stiffening at full percent: one frame, the latest state
             else:
                 frames.append(frame)
+            if spent_all and not last:
+                # out of time or iterations part of the way: whatever that step reached, the
+                # fold is not done (fold() reports the limit)
+                state = state._replace(status=jnp.asarray(Status.RUNNING, jnp.int32))
             if last or spent_all:
                 break
-            # grow only after two easy steps in a row: a step just halved would fail again
+            # grow after an easy step, and after a halving only once two in a row were easy: a
+            # step just halved would fail again
             easy = converged and jump <= 0.5 * PATH_JUMP and steps <= PATH_EASY_ITERATIONS
             if easy and calm:
                 step = min(PATH_MAX_STEP, 2.0 * step)

@@ -476,3 +476,26 @@ def test_fold_extents():
     targets = np.array([[1.0, -2.0, 0.5], [0.3, 0.2, -0.1]])
     np.testing.assert_array_equal(batch_module._fold_extents([0.5, -2.0], targets), [1.0, 0.6])
     np.testing.assert_array_equal(batch_module._fold_extents([1.0], np.zeros((1, 0))), [0.0])
+
+
+def test_variants_of_one_pattern_get_the_barriers_each_needs():
+    """One topology, two fold angles: the full fold gets barriers, the part fold none, in
+    whatever order they come, and each equals its own direct fold."""
+    part, full = patterns.single_crease(fold_angle=1.0), patterns.single_crease(fold_angle=np.pi)
+    for order in ((part, full), (full, part)):
+        results = fold_batch(list(order), progress=False)
+        for cp, r in zip(order, results, strict=True):
+            single = fold(cp, path="direct")
+            assert r.barriers == single.barriers
+            assert np.max(np.abs(r.positions - single.positions)) <= 1e-10 * cp.diameter
+
+
+def test_a_mesh_has_a_hessian_layout_per_set_of_barriers():
+    from origami_jax.energy import make_structure
+    from origami_jax.solvers.newton import hessian_layout
+
+    mesh = patterns.miura_ori(3, 3).mesh
+    plain = hessian_layout(mesh, make_structure(mesh, False), sparse=True)
+    barred = hessian_layout(mesh, make_structure(mesh, True), sparse=True)
+    assert barred.blocks.shape[0] == plain.blocks.shape[0] + 6 * len(mesh.triangles)
+    assert hessian_layout(mesh, make_structure(mesh, False), sparse=True) is plain

@@ -9,8 +9,9 @@ import pytest
 from origami_jax import CreasePattern, fold, io, patterns
 from origami_jax.barrier import HINGE_GAP
 from origami_jax.energy import Barriers
-from origami_jax.fold import PATH_END, is_unfolded
+from origami_jax.fold import PATH_MAX_STEP, is_unfolded
 from origami_jax.kinematics import rigid_fold
+from origami_jax.solvers import Status
 
 
 def test_a_full_fold_follows_the_path_from_flat():
@@ -103,9 +104,62 @@ def test_stiff_and_extreme_cases_reach_the_zero_energy_state(name):
 def test_path_end_raises_the_stiffness_after_the_fold():
     # the path's second half, at full percent, only stiffens the bars and facets back to
     # the user's: the last frame and the result agree with a direct solve from there
-    assert PATH_END == 2.0
     cp = patterns.degree4_vertex(2.0, 0.7, np.pi)
     result = fold(cp)
     again = fold(cp, start=result.positions, path="direct")
     assert again.converged and again.iterations <= 2
     np.testing.assert_allclose(again.positions, result.positions, atol=1e-9 * cp.diameter)
+
+
+def test_path_frames_rise_by_the_adaptive_steps():
+    result = fold(patterns.degree4_vertex(2.0, 0.7, np.pi))
+    percents = np.array([f.percent for f in result.frames])
+    assert np.all(np.diff(percents) > 0) and percents[-1] == pytest.approx(1.0)
+    assert np.max(np.diff(percents)) <= PATH_MAX_STEP + 1e-12
+
+
+def test_a_path_cut_short_is_not_converged():
+    cp = patterns.degree4_vertex(2.0, 0.7, np.pi)
+    for limit in (3, 8, 24):
+        result = fold(cp, max_iter=limit)
+        assert not result.converged and result.status == Status.MAX_ITER, limit
+        assert result.iterations <= limit
+    assert not fold(cp, max_time=0.0).converged
+
+
+def test_first_order_solvers_follow_the_path_on_the_same_scale():
+    """L-BFGS asked to follow the path: its tolerance is relative to the same start gradient
+    as a direct solve's (its grad_norm_rel of the same size), and it reaches the target."""
+    cp = patterns.single_crease(fold_angle=np.pi)
+    path = fold(cp, solver="lbfgs", path="continuation")
+    direct = fold(cp, solver="lbfgs", path="direct")
+    assert path.converged and direct.converged
+    assert path.grad_norm_rel <= 1e-10 and path.grad_norm_rel > 1e-14
+    assert path.fold_angle_error_max <= 1e-6
+
+
+def test_a_folded_form_is_its_own_target_and_mirrored_if_folded_against_its_letters():
+    """A FOLD folded form without fold angles: its creases' targets are their angles in it;
+    a form whose creases fold against their letters is read as its mirror image."""
+    from origami_jax.io import from_fold_dict
+    from origami_jax.kinematics import fold_angles_np
+
+    half = np.sqrt(0.5)
+    coords = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0.5, 0.5, half]]
+    frame = {
+        "file_spec": 1.2,
+        "frame_classes": ["foldedForm"],
+        "vertices_coords": coords,
+        "edges_vertices": [[0, 1], [1, 2], [2, 0], [2, 3], [3, 0]],
+        "faces_vertices": [[0, 1, 2], [0, 2, 3]],
+    }
+    for letter in "VM":
+        cp = from_fold_dict({**frame, "edges_assignment": ["B", "B", letter, "B", "B"]})
+        k = 2
+        assert abs(cp.fold_angles[k]) == pytest.approx(np.pi / 2, abs=1e-12)
+        assert np.sign(cp.fold_angles[k]) == (1 if letter == "V" else -1)
+        start = np.asarray(cp.start)[cp.mesh.source_vertex]
+        measured = fold_angles_np(start, cp.mesh.hinges[[k]])[0]
+        assert measured == pytest.approx(cp.fold_angles[k], abs=1e-12)  # mirrored if need be
+        result = fold(cp)
+        assert result.converged and result.iterations <= 2

@@ -99,6 +99,7 @@ from typing import Any
 import numpy as np
 
 from origami_jax.io.planar import pattern_from_segments, slit_edges
+from origami_jax.kinematics import fold_angles_np
 from origami_jax.pattern import (
     ASSIGNMENTS,
     MAX_COORDINATE,
@@ -377,13 +378,7 @@ def _folded_angles(pattern: CreasePattern) -> tuple[np.ndarray, bool]:
         for k in range(pattern.num_edges)
         if pattern.assignments[k] in "MV" and not np.any(mesh.hinges[k] < 0)
     ]
-    measured = {}
-    for k in creases:
-        i, j, a, b = mesh.hinges[k]
-        e = x[j] - x[i]
-        n_left, n_right = np.cross(e, x[a] - x[i]), np.cross(x[b] - x[i], e)
-        sin = np.dot(np.cross(n_right, n_left), e) / np.linalg.norm(e)
-        measured[k] = math.atan2(sin, np.dot(n_left, n_right))
+    measured = dict(zip(creases, fold_angles_np(x, mesh.hinges[creases]), strict=True))
     # folded flat (+-180 degrees) a crease has no side: the others tell which way up it is
     sided = [k for k in creases if 1e-9 < abs(measured[k]) < math.pi - 1e-9]
     agree = sum((measured[k] > 0) == (pattern.assignments[k] == "V") for k in sided)

@@ -415,6 +415,7 @@ def element_floor(x: Array, problem: Problem, reference: Reference) -> Array:
         if rows.corners.shape[1] == 4:  # the hinges' barriers: in their terms above
             continue
         size = jnp.sqrt(jnp.sum(rows.gradient**2, axis=2))  # (n, 3)
-        spread = jnp.abs(rows.slope) + rows.rounding * jnp.abs(rows.curvature)
+        # an area ratio's rounding is about eps
+        spread = jnp.abs(rows.slope) + jnp.abs(rows.curvature)
         force = force.at[rows.corners].add((spread[:, None] * size) ** 2)
     return eps * jnp.sqrt(jnp.max(force, axis=0))

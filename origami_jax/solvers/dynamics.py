@@ -269,7 +269,7 @@ class Dynamics:
             iteration=zero,
             energy=value,
             grad_max=gmax,
-            grad_max0=tolerance_scale(problem, u, reference, gmax),
+            grad_max0=tolerance_scale(p0, u, reference, gmax),
             status=status.astype(jnp.int32),
             dt=dt,
             dt_stable=dt_stable,

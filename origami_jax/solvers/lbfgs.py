@@ -87,18 +87,20 @@ class Lbfgs:
         )
 
     def init(self, problem: Problem) -> LbfgsState:
-        """The start state. The energy and gradient at the start are first evaluated by the
-        first iteration (which sets ``grad_max0``), so no separate gradient is compiled here."""
+        """The start state, with the gradient scale of the tolerance (:func:`tolerance_scale`);
+        the energy at the start is first evaluated by the first iteration."""
         u = jnp.zeros_like(problem.start)
         one = jnp.ones((), u.dtype)
+        reference = start_reference(problem)
+        g_start = jnp.max(jnp.abs(jax.grad(objective)(u, problem, reference)))
         return LbfgsState(
             u=u,
             opt_state=self._optimizer().init(u),
-            reference=start_reference(problem),
+            reference=reference,
             iteration=jnp.zeros((), jnp.int32),
             energy=jnp.full((), jnp.inf, u.dtype),
             grad_max=one,
-            grad_max0=one,
+            grad_max0=tolerance_scale(problem, u, reference, g_start),
             status=jnp.asarray(Status.RUNNING, jnp.int32),
             stalls=jnp.zeros((), jnp.int32),
             progress=Progress.start(u.dtype),
@@ -114,9 +116,7 @@ class Lbfgs:
             value, grad = optax.value_and_grad_from_state(f)(s.u, state=s.opt_state)
             first = s.iteration == 0
             g_start = jnp.max(jnp.abs(grad))
-            grad_max0 = jnp.where(
-                first, tolerance_scale(problem, s.u, s.reference, g_start), s.grad_max0
-            )
+            grad_max0 = s.grad_max0
             updates, opt_state = opt.update(
                 grad, s.opt_state, s.u, value=value, grad=grad, value_fn=f
             )

@@ -248,7 +248,8 @@ _LAYOUTS: dict = {}
 
 def hessian_layout(mesh: Mesh, structure: Structure, sparse: bool) -> HessianLayout:
     """The assembly layout of a mesh's Hessian (cached per mesh; device arrays)."""
-    key = (id(mesh), sparse)
+    # the elements depend on the barriers built: a mesh has a layout per set of them
+    key = (id(mesh), sparse, structure.barriers, structure.num_free, structure.triangles.shape[0])
     hit = _LAYOUTS.get(key)
     if hit is not None and hit[0]() is mesh:
         return hit[1]
@@ -406,7 +407,7 @@ def element_blocks(
     else:
         out = [sign[(None, slice(None), slice(None), None, None, *ones)] * a[:, None, None]]
     if structure.hinges.shape[0]:
-        goal, kl = hinge_weights(structure, params)
+        kl = hinge_weights(structure, params)[1]
         q = x[structure.hinges]
         g = dihedral_gradients(q)
         pairs = list(zip(*UPPER_PAIRS[4], strict=True)) if upper else None
@@ -616,7 +617,6 @@ def _element_work(x: Array, structure: Structure, params, reference: Reference) 
     length = bar_lengths(x, structure.bars)
     work = jnp.sum(params.stiffness.axial / l0 * jnp.abs(length - l0) * length, axis=0)
     if structure.hinges.shape[0]:
-        goal, weight = hinge_weights(structure, params)
         rho = dihedral_angles(x[structure.hinges], reference.angles)
         moment = hinge_terms(rho, structure, params)[1]
         work += jnp.sum(jnp.abs(moment), axis=0)
@@ -647,7 +647,7 @@ def _vertex_buckling(
         return softening, zeros
     q = x[structure.hinges]
     g = dihedral_gradients(q)
-    goal, weight = hinge_weights(structure, params)
+    weight = hinge_weights(structure, params)[1]
     if structure.barriers.hinge_gap > 0:  # a barrier near its wall supports the vertex too
         weight = hinge_terms(dihedral_angles(q, reference.angles), structure, params)[2]
     support = weight[:, None] * jnp.sum(g * g, axis=2)
