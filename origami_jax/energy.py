@@ -180,12 +180,16 @@ class FoldParams(NamedTuple):
         ``percent * target``, as in Origami Simulator.
       rest_length: (E,) rest lengths of the bars, pattern units.
       stiffness: a :class:`Stiffness`.
+      gap_scale: () a multiple of the structure's hinge gap (``None``: 1). Continuation in fold
+        percent widens the gap on its way (a narrow one makes every step that turns a crease
+        held at its wall tiny) and narrows it back at full percent.
     """
 
     target: Array
     percent: Array
     rest_length: Array
     stiffness: Stiffness
+    gap_scale: Array | None = None
 
 
 # a driven crease whose target reaches this far (radians) is folded nearly flat: such scenes get
@@ -378,6 +382,13 @@ def barrier_weights(structure: Structure, params: FoldParams) -> tuple[Array, Ar
     return work[structure.hinge_bars], jnp.mean(work[structure.triangle_bars], axis=1)
 
 
+def hinge_gap(structure: Structure, params: FoldParams) -> Array | float:
+    """How far past ``pi`` the hinge barriers reach their wall (radians): the structure's gap
+    times ``params.gap_scale``."""
+    gap = structure.barriers.hinge_gap
+    return gap if params.gap_scale is None else gap * params.gap_scale
+
+
 def hinge_terms(rho: Array, structure: Structure, params: FoldParams) -> tuple[Array, Array, Array]:
     """Per torsion hinge: its energy (spring and, if built, barrier) and that energy's first and
     second derivatives in the fold angle ``rho`` (radians). The barrier's weight is its bar's
@@ -386,8 +397,8 @@ def hinge_terms(rho: Array, structure: Structure, params: FoldParams) -> tuple[A
     goal, weight = hinge_weights(structure, params)
     diff = rho - goal
     e, d1, d2 = 0.5 * weight * diff * diff, weight * diff, weight
-    gap = structure.barriers.hinge_gap
-    if gap > 0:
+    if structure.barriers.hinge_gap > 0:
+        gap = hinge_gap(structure, params)
         b, b1, b2 = hinge_barrier(rho, barrier_weights(structure, params)[0], gap)
         e, d1, d2 = e + b, d1 + b1, d2 + b2
     return e, d1, d2
@@ -446,8 +457,8 @@ def barrier_distances(
     (``pi + gap - |rho|`` over ``gap`` for the hinges, ``A / (A0 floor)`` for the triangles;
     empty without barriers): what a solver's step limit keeps positive."""
     out = []
-    gap = structure.barriers.hinge_gap
-    if gap > 0 and structure.hinges.shape[0]:
+    if structure.barriers.hinge_gap > 0 and structure.hinges.shape[0]:
+        gap = hinge_gap(structure, params)
         rho = fold_angles(x, structure.hinges, reference.angles)
         out.append((gap - (jnp.abs(rho) - jnp.pi)) / gap)
     if structure.triangles.shape[0]:
@@ -477,9 +488,9 @@ def barrier_rows(
     explicit dynamics stops at a wall, and what sets the rounding floor of a gradient that
     barriers hold)."""
     out = []
-    gap = structure.barriers.hinge_gap
     l0 = params.rest_length
-    if gap > 0 and structure.hinges.shape[0]:
+    if structure.barriers.hinge_gap > 0 and structure.hinges.shape[0]:
+        gap = hinge_gap(structure, params)
         q = x[structure.hinges]
         rho = dihedral_angles(q, reference.angles)
         d = (gap - (jnp.abs(rho) - jnp.pi)) / gap

@@ -442,7 +442,10 @@ def fold(
       path: ``"continuation"``: follow the fold from flat, the fold percent raised in adaptive
         steps (the states in ``result.frames``); ``"direct"``: one solve at the full percent;
         ``"auto"`` (default): continuation with Newton where the scene has barriers by default
-        and the start is the unfolded sheet, else direct.
+        and the start is the unfolded sheet, else direct; a direct Newton solve from the
+        unfolded sheet that stalls, or ends with a crease through pi or a collapsed triangle,
+        is then followed from flat (with the barriers, unless ``barriers=False``), and its
+        time and iterations count in the result's.
 
     Returns:
       A :class:`FoldResult`; it never holds NaN positions: a solve that meets a non-finite value
@@ -479,12 +482,15 @@ def fold(
     if path not in ("auto", "direct", "continuation"):
         raise ValueError(f"path must be 'auto', 'direct' or 'continuation', got {path!r}")
     structure = make_structure(mesh, barriers)
+    # a direct solve chosen by "auto" that ends with a warning sign is followed again from flat
+    retry = False
     if path == "auto":
         # a given start (or a folded form's own) is where the user wants the solve to begin;
         # the first-order solvers' iterations are many already (dynamics has its own ramp)
         follows = getattr(solver_obj, "follows_path", False)
         flat = start is None or is_unfolded(start, mesh)
         path = "continuation" if follows and flat and needs_continuation(mesh) else "direct"
+        retry = follows and flat and path == "direct"
     bars: list[ProgressBar] = []  # made at the first chunk: its clock starts after compiling
 
     def on_chunk(iterations, sample):
@@ -526,6 +532,40 @@ def fold(
             time.perf_counter() - t0,
             [],
         )
+        warning = _warning_sign(solved, mesh)
+        if retry and warning is not None and solved.iterations < max_iter:
+            if warning != "stalled" and barriers is None:
+                structure = make_structure(mesh, True)  # what went wrong is what they prevent
+            spent = solved.wall_time
+            again = _solve_path(
+                solver_obj,
+                mesh,
+                structure,
+                params,
+                start,
+                tol,
+                max_iter - solved.iterations,
+                None if max_time is None else max(max_time - spent, 0.0),
+                record_every,
+                None
+                if on_chunk is None
+                else functools.partial(_shifted, on_chunk, solved.iterations),
+            )
+            path = "continuation"
+            solved = again._replace(
+                samples=solved.samples
+                + [
+                    {
+                        **sample,
+                        "iteration": solved.iterations + sample["iteration"],
+                        "wall_time": spent + sample["wall_time"],
+                    }
+                    for sample in again.samples
+                ],
+                iterations=solved.iterations + again.iterations,
+                compile_time=solved.compile_time + again.compile_time,
+                wall_time=spent + again.wall_time,
+            )
     state, m, x, angles, samples, out_of_time, iterations, compile_time, wall_time, frames = solved
     for bar in bars:
         bar.close()
@@ -596,11 +636,31 @@ PATH_TOL = 1e-6
 PATH_STEP_ITERATIONS = 200
 PATH_EASY_ITERATIONS = 20
 PATH_SOFT_AXIAL = 30.0
+# the hinge barriers' gap on the way (radians; narrowed back to the scene's with the stiffening):
+# a crease held at a narrow wall lets a step turn it by a fraction of the gap only, and the
+# second-order turn of any step that moves its faces is larger than that
+PATH_HINGE_GAP = 1e-2
 PATH_END = 2.0
 
 
 def _shifted(on_chunk, offset: int, iterations: int, sample: dict) -> None:
     on_chunk(offset + iterations, sample)
+
+
+def _warning_sign(solved: _Solved, mesh) -> str | None:
+    """What makes a direct solve from flat worth following again from flat: it stalled (or met
+    a non-finite value), a crease went through itself, or a triangle collapsed; else ``None``
+    (converged and clean, or cut short by the user's limits)."""
+    status = int(solved.state.status)
+    if status == Status.RUNNING:  # the user's limits: no time or iterations for another try
+        return None
+    if status in (Status.STALLED, Status.NONFINITE):
+        return "stalled"
+    if np.any(np.abs(solved.angles) > np.pi + HINGE_GAP):
+        return "through pi"
+    if len(collapsed_triangles(np.asarray(solved.positions, np.float64), mesh)[0]):
+        return "collapsed"
+    return None
 
 
 def is_unfolded(x: np.ndarray, mesh) -> bool:
@@ -633,11 +693,12 @@ def _solve_path(
 
     On the way the bars and facets are soft, in Origami Simulator's ratios to the crease
     (:data:`PATH_SOFT_AXIAL`, facets as the crease: a sheet that cannot fold rigidly bends and
-    stretches instead of folding creases the wrong way); at full percent a second stretch of
-    the path (to :data:`PATH_END`) stiffens them back to the user's, so the result is the
-    equilibrium of the model asked for. The tolerance is relative to the gradient at the flat
-    start fully driven (the creases' alone there, as a direct solve's); the intermediate steps
-    stop at :data:`PATH_TOL`."""
+    stretches instead of folding creases the wrong way), and the hinge barriers' gap is
+    :data:`PATH_HINGE_GAP`; at full percent a second stretch of the path (to
+    :data:`PATH_END`) stiffens them back to the user's and narrows the gap back to the scene's,
+    so the result is the equilibrium of the model asked for. The tolerance is relative to the
+    gradient at the flat start fully driven (the creases' alone there, as a direct solve's);
+    the intermediate steps stop at :data:`PATH_TOL`."""
     dtype = params.rest_length.dtype
     full = params.percent
     x = np.asarray(mesh.vertices if start is None else start, np.float64)
@@ -650,13 +711,20 @@ def _solve_path(
         crease > 0, jnp.minimum(1.0, PATH_SOFT_AXIAL * crease / jnp.mean(k.axial)), 1.0
     )
     soft_facet = jnp.where(crease > 0, jnp.minimum(1.0, crease / jnp.mean(k.facet)), 1.0)
+    base_gap = structure.barriers.hinge_gap
+    wide = max(1.0, PATH_HINGE_GAP / base_gap) if base_gap > 0 else 1.0
+    user_gap = 1.0 if params.gap_scale is None else params.gap_scale
 
     def problem_at(t, x, reference):
         # t in [0, 1]: the fold percent raised at soft stiffness; t in [1, 2]: the stiffness
         # raised to the user's at full percent
         soft = max(0.0, 1.0 - max(t - 1.0, 0.0))
         stiffness = k._replace(axial=k.axial * soft_axial**soft, facet=k.facet * soft_facet**soft)
-        at = params._replace(percent=jnp.asarray(full * min(t, 1.0), dtype), stiffness=stiffness)
+        at = params._replace(
+            percent=jnp.asarray(full * min(t, 1.0), dtype),
+            stiffness=stiffness,
+            gap_scale=jnp.asarray(wide**soft * user_gap, dtype),
+        )
         problem = make_problem(mesh, structure, at, x, tol, reference=reference)
         return prepare(solver, problem, mesh)
 

@@ -19,6 +19,7 @@ from origami_jax.barrier import (
 from origami_jax.energy import (
     Barriers,
     Reference,
+    barrier_distances,
     energy,
     initial_reference,
     make_params,
@@ -144,6 +145,32 @@ def _squeezed_single_crease():
     x = jnp.asarray(x)
     angles = fold_angles(x, structure.hinges, 0.5 * jnp.pi * jnp.ones(structure.hinges.shape[0]))
     return cp, structure, params, x, Reference(angles, triangle_normals(x, structure.triangles))
+
+
+def test_gap_scale_widens_the_hinge_barrier_as_a_wider_structure_gap():
+    """``FoldParams.gap_scale`` (what the path widens the gap by, traced so the path compiles
+    once) gives exactly the energy, gradient and barrier distances of a structure built with
+    the gap that many times wider."""
+    cp, structure, params, x, ref = _squeezed_single_crease()
+    wide = make_structure(cp.mesh, Barriers(hinge_gap=0.5 * 1.6, area_floor=0.5))
+    scaled = params._replace(gap_scale=jnp.asarray(1.6))
+    assert float(energy(x, structure, scaled, ref)) == pytest.approx(
+        float(energy(x, wide, params, ref)), rel=1e-13
+    )
+    assert float(energy(x, structure, scaled, ref)) != pytest.approx(
+        float(energy(x, structure, params, ref)), rel=1e-3
+    )
+    np.testing.assert_allclose(
+        jax.grad(energy)(x, structure, scaled, ref),
+        jax.grad(energy)(x, wide, params, ref),
+        rtol=1e-12,
+        atol=1e-15,
+    )
+    np.testing.assert_allclose(
+        barrier_distances(x, structure, scaled, ref),
+        barrier_distances(x, wide, params, ref),
+        rtol=1e-13,
+    )
 
 
 def test_barrier_hessian_blocks_are_exact_and_the_convex_part_is_psd():

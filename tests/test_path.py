@@ -9,7 +9,7 @@ import pytest
 from origami_jax import CreasePattern, fold, io, patterns
 from origami_jax.barrier import HINGE_GAP
 from origami_jax.energy import Barriers
-from origami_jax.fold import PATH_MAX_STEP, is_unfolded
+from origami_jax.fold import PATH_HINGE_GAP, PATH_MAX_STEP, is_unfolded
 from origami_jax.kinematics import rigid_fold
 from origami_jax.solvers import Status
 
@@ -26,9 +26,10 @@ def test_a_full_fold_follows_the_path_from_flat():
     assert np.all(np.diff(percents) >= 0)
     np.testing.assert_array_equal(result.frames[-1].positions, result.positions)
     np.testing.assert_allclose(result.frames[0].positions, cp.mesh.vertices)
-    for frame in result.frames:
+    for frame in result.frames:  # on the way the gap is wider; at the end, the scene's
         assert frame.positions.shape == result.positions.shape
-        assert np.max(np.abs(frame.fold_angles)) <= np.pi + HINGE_GAP
+        assert np.max(np.abs(frame.fold_angles)) <= np.pi + PATH_HINGE_GAP
+    assert np.max(np.abs(result.frames[-1].fold_angles)) <= np.pi + HINGE_GAP
     # the history starts where a direct solve's does: flat, fully driven
     direct = fold(cp, path="direct")
     assert result.history["energy"][0] == pytest.approx(direct.history["energy"][0], rel=1e-12)
@@ -163,3 +164,22 @@ def test_a_folded_form_is_its_own_target_and_mirrored_if_folded_against_its_lett
         assert measured == pytest.approx(cp.fold_angles[k], abs=1e-12)  # mirrored if need be
         result = fold(cp)
         assert result.converged and result.iterations <= 2
+
+
+def test_a_direct_solve_through_pi_is_followed_again_from_flat():
+    # creases driven to 0.89 pi: no barriers by default, and the direct solve from flat ends
+    # with creases through themselves; "auto" then follows the fold from flat, with barriers
+    cp = patterns.waterbomb(2, 2)
+    direct = fold(cp, percent=1.78, path="direct")
+    assert direct.converged and len(direct.through_pi) > 0 and direct.barriers == Barriers(0, 0)
+    result = fold(cp, percent=1.78)
+    assert result.path == "continuation" and result.barriers == Barriers()
+    assert result.converged, result.reason
+    assert len(result.through_pi) == 0 and len(result.collapsed) == 0
+    assert len(result.intersections) == 0 < len(direct.intersections)
+    # the direct try's work is counted: its iterations and time come first in the history
+    assert result.iterations > direct.iterations
+    assert result.history["iteration"][-1] == result.iterations
+    assert np.all(np.diff(result.history["wall_time"]) >= 0)
+    # the user's choice of barriers stands in the second try
+    assert fold(cp, percent=1.78, barriers=False).barriers == Barriers(0, 0)
