@@ -46,6 +46,11 @@ import scipy.sparse as sp  # noqa: E402
 
 from origami_jax import fold, patterns  # noqa: E402
 from origami_jax.solvers import hostsparse  # noqa: E402
+from origami_jax.tuning import tune_process  # noqa: E402
+
+# the settings Newton's solves run with in the CLI and benchmarks (origami_jax.tuning); the
+# OpenBLAS kernels before cvxopt is first loaded
+TUNED = tune_process()
 
 MAX_ITER = {"pcg_lagged": 300, "pcg_block_jacobi": 3000}
 TOLS = (1e-3, 1e-8)
@@ -273,7 +278,8 @@ def main(out: Path, quick: bool = False) -> None:
     out.mkdir(parents=True, exist_ok=True)
     machine = (
         f"{platform.machine()}, {usable_cores()} cores, jax {jax.__version__}, "
-        f"CPU {cpu_name()}, Newton's direct solves: {hostsparse.backend_details()}"
+        f"CPU {cpu_name()}, Newton's direct solves: {hostsparse.backend_details()}, "
+        f"process tuning (origami_jax.tuning): {TUNED}"
     )
     rows, folds = [], {}
     for n in (30,) if quick else (30, 100):

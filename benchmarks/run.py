@@ -54,11 +54,12 @@ import numpy as np  # noqa: E402
 
 from origami_jax import PatternError, fold, io, patterns  # noqa: E402
 from origami_jax.kinematics import rigid_fold  # noqa: E402
-from origami_jax.memory import keep_freed_memory  # noqa: E402
 from origami_jax.solvers import hostsparse, origami_simulator  # noqa: E402
+from origami_jax.tuning import tune_process  # noqa: E402
 
-# as the README advises for large sheets: freed buffers stay in the heap (origami_jax.memory)
-KEPT_FREED_MEMORY = keep_freed_memory()
+# as the README advises for large sheets (origami_jax.tuning): freed buffers stay in the heap,
+# CHOLMOD's OpenBLAS runs this CPU's kernels, MKL's threads do not spin after PARDISO's calls
+TUNED = tune_process()
 
 THRESHOLDS = (1e-3, 1e-6, 1e-8, 1e-9)
 SOLVERS = ("newton", "lbfgs", "dynamics")
@@ -194,7 +195,7 @@ def main(argv=None) -> int:
         f"{platform.machine()}, {usable_cores()} cores, jax {jax.__version__}, "
         f"device {device.platform}: {device.device_kind}, "
         f"CPU {cpu_name()}, sparse Newton solves: {hostsparse.backend_details()}, "
-        f"freed memory kept (origami_jax.memory): {KEPT_FREED_MEMORY}"
+        f"process tuning (origami_jax.tuning): {TUNED}"
     )
     only = None if args.solvers is None else set(args.solvers.split(","))
     if args.part == "all":

@@ -61,6 +61,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from origami_jax.caches import LruCache
 from origami_jax.energy import (
     NO_BARRIERS,
     Barriers,
@@ -94,7 +95,7 @@ from origami_jax.solvers.base import (
 )
 from origami_jax.solvers.blocksparse import block_plan
 from origami_jax.solvers.dynamics import lumped_mass
-from origami_jax.solvers.newton import HessianLayout, hessian_elements, layout_arrays
+from origami_jax.solvers.newton import hessian_elements, layout_arrays
 
 __all__ = [
     "fold_batch",
@@ -876,8 +877,9 @@ _QUEUE_BYTES = 2**26
 # the outbox holds this many exits per slot (a call ends when it is full)
 _OUTBOX_PER_SLOT = 4
 _INT32_MAX = 2**31 - 1
-_QUEUE_FNS: dict = {}
-_INITS: dict = {}
+# compiled slot loops and jitted starts, the most recently used kept (origami_jax.caches)
+_QUEUE_FNS = LruCache()
+_INITS = LruCache()
 
 
 def _sharded(fn, devices: list, in_axes: tuple, out_axes: tuple):
@@ -907,8 +909,9 @@ def _entry_width(slots: int) -> int:
 def _compiled_queue(solver, num_edges, axes, devices, width, args):
     """The compiled slot loop for these shapes (cached) and its compile time (0 when cached)."""
     key = (solver, _signature(args[:5]), num_edges, tuple(devices), width)
-    if key in _QUEUE_FNS:
-        return _QUEUE_FNS[key], 0.0
+    hit = _QUEUE_FNS.get(key)
+    if hit is not None:
+        return hit, 0.0
     lane_axes = _Lanes(state=0, problem=axes, row=0, age=0, entry=0)
     fn = _sharded(
         _queue_fn(solver, num_edges, axes, width),
@@ -917,12 +920,12 @@ def _compiled_queue(solver, num_edges, axes, devices, width, args):
         (lane_axes, 0, 0, 0, 0, 0),
     )
     t0 = time.perf_counter()
-    _QUEUE_FNS[key] = fn.lower(*args).compile()
+    _QUEUE_FNS[key] = compiled_fn = fn.lower(*args).compile()
     _COMPILES[0] += 1
-    return _QUEUE_FNS[key], time.perf_counter() - t0
+    return compiled_fn, time.perf_counter() - t0
 
 
-_SHAPES: dict = {}
+_SHAPES = LruCache()
 
 
 def _limits(max_iter: int, max_time: float | None, per_step: float | None) -> tuple:
@@ -941,15 +944,16 @@ def _lane_shapes(solver: Solver, problem: Problem, axes, num_edges: int):
     """Shapes of the slots' solver state, metrics, positions and angles (cached: tracing the
     solver costs a tenth of a second)."""
     key = (solver, _signature(problem), num_edges)
-    if key not in _SHAPES:
-        _SHAPES[key] = jax.eval_shape(
+    shapes = _SHAPES.get(key)
+    if shapes is None:
+        shapes = _SHAPES[key] = jax.eval_shape(
             jax.vmap(lambda p: measured(solver.init(p), p, num_edges), in_axes=(axes,)), problem
         )
-    return _SHAPES[key]
+    return shapes
 
 
-# the block plans of the last topologies folded with shared index arrays
-_BLOCK_LAYOUTS: dict[tuple, HessianLayout] = {}
+# the block plans (HessianLayout) of the last topologies folded with shared index arrays
+_BLOCK_LAYOUTS = LruCache(16)
 
 
 def _fold_extents(percents: list, targets: np.ndarray) -> np.ndarray:
@@ -991,9 +995,7 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
                 _padded_aux(solver, first, first.problem, to),
                 plan=block_plan(elements, to.vertices),
             )
-        _BLOCK_LAYOUTS[key] = layout  # the most recent last
-        while len(_BLOCK_LAYOUTS) > 16:
-            _BLOCK_LAYOUTS.pop(next(iter(_BLOCK_LAYOUTS)))
+        _BLOCK_LAYOUTS[key] = layout
 
     padded_first = None if shared else _padded(first, to, solver)
 

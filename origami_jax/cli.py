@@ -7,9 +7,14 @@ fold; see :mod:`origami_jax.viz`, needs ``pip install "origami-jax[viz]"``).
 Runs in float64 unless ``--float32`` is given. With ``--cache`` it keeps compiled solvers in a
 persistent cache (``$XDG_CACHE_HOME/origami_jax/<machine>``, default ``~/.cache/origami_jax``,
 one folder per CPU kind) so a second run on a pattern of the same size does not compile again;
-it is off by default because XLA 0.10 logs a CPU-feature warning on every cached load. The CLI,
-unlike the library, may set JAX flags. Bad input prints one line ``error: ...`` and exits with
-code 2.
+it is off by default because XLA 0.10 logs a CPU-feature warning on every cached load. Bad input
+prints one line ``error: ...`` and exits with code 2.
+
+The command (:func:`console_main`: the ``origami-jax`` script and ``python -m origami_jax``),
+unlike the library, sets up its process: float64 (``jax_enable_x64``), the persistent cache,
+the tuning of :func:`origami_jax.tuning.tune_process`, warnings printed on one line
+(``warning: ...``) and matplotlib's non-interactive backend. :func:`main` runs a command in the
+process as it finds it (float64, the default, then needs ``jax_enable_x64`` on).
 """
 
 from __future__ import annotations
@@ -179,9 +184,6 @@ def _render(args, pattern, stiffness) -> int:
         if suffix == ".html":
             viz.save_html(result, out, color=args.color)
         else:
-            import matplotlib
-
-            matplotlib.use("Agg")  # no window; the CLI may choose the backend
             import matplotlib.pyplot as plt
 
             fig = viz.plot_fold(result, color=args.color)
@@ -193,10 +195,13 @@ def _render(args, pattern, stiffness) -> int:
     return 0 if result.converged else 1
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
-    if args.command == "info":
-        return _info(args.input)
+def _show_warning(message, category, *rest, **kw) -> None:
+    """Warnings on one line, like errors (the command's ``warnings.showwarning``)."""
+    print(f"warning: {message}", file=sys.stderr)
+
+
+def _set_up_process(args: argparse.Namespace) -> None:
+    """The command's process-wide settings (see the module docstring); before any solve."""
     float32 = getattr(args, "float32", False)
     if not float32:
         os.environ.setdefault("JAX_ENABLE_X64", "1")
@@ -209,18 +214,41 @@ def main(argv: Sequence[str] | None = None) -> int:
         cache = os.path.join(base, "origami_jax", _machine_key())
         jax.config.update("jax_compilation_cache_dir", cache)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    from origami_jax.tuning import tune_process
+
+    tune_process()  # large sheets faster: before the first sparse solve loads its backend
+    warnings.showwarning = _show_warning
+    if args.command == "render":
+        try:
+            import matplotlib
+        except ImportError:  # reported by the command, before any work
+            return
+        matplotlib.use("Agg")  # no window
+
+
+def console_main(argv: Sequence[str] | None = None) -> int:
+    """The ``origami-jax`` command (``[project.scripts]``, ``python -m origami_jax``): sets up
+    the process (see the module docstring), then runs :func:`main`'s command."""
+    args = _parser().parse_args(argv)
+    if args.command != "info":  # info solves nothing and reports its warnings itself
+        _set_up_process(args)
+    return _run(args)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command (``fold``, ``info`` or ``render``, with its arguments ``argv``; default
+    ``sys.argv[1:]``) in this process, changing none of its settings; returns the exit code."""
+    return _run(_parser().parse_args(argv))
+
+
+def _run(args: argparse.Namespace) -> int:
+    if args.command == "info":
+        return _info(args.input)
     import jax.numpy as jnp
 
     from origami_jax import PatternError, io
     from origami_jax.fold import fold
-    from origami_jax.memory import keep_freed_memory
 
-    keep_freed_memory()  # large sheets about a fifth faster (a process-wide malloc setting)
-
-    def show_warning(message, category, *rest, **kw) -> None:  # one line, like errors
-        print(f"warning: {message}", file=sys.stderr)
-
-    warnings.showwarning = show_warning
     if args.command == "render":
         try:
             pattern, stiffness = _load(args)
@@ -259,4 +287,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(console_main())

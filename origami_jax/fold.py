@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from origami_jax.barrier import HINGE_GAP
+from origami_jax.caches import LruCache
 from origami_jax.energy import (
     NO_BARRIERS,
     Barriers,
@@ -228,7 +229,7 @@ class FoldResult:
 
 # -- compiled pieces, cached per (solver, shapes) -------------------------------------------------
 
-_CACHE: dict = {}
+_CACHE = LruCache()  # the most recently used compiled solves (origami_jax.caches)
 
 
 def _signature(tree) -> tuple:
@@ -263,8 +264,9 @@ def compiled(solver: Solver, problem, num_edges: int):
     """``(start, advance)`` of :func:`solve_fns` compiled for this solver and these shapes
     (cached), and the compile time (0 when cached)."""
     cache_key = (solver, _signature(problem), num_edges)
-    if cache_key in _CACHE:
-        return _CACHE[cache_key], 0.0
+    hit = _CACHE.get(cache_key)
+    if hit is not None:
+        return hit, 0.0
     start, advance = solve_fns(solver, num_edges)
     t0 = time.perf_counter()
     start_c = jax.jit(start).lower(problem).compile()
@@ -273,7 +275,7 @@ def compiled(solver: Solver, problem, num_edges: int):
     advance_c = jax.jit(advance).lower(state_shape, problem, steps).compile()
     compile_time = time.perf_counter() - t0
     _CACHE[cache_key] = (start_c, advance_c)
-    return _CACHE[cache_key], compile_time
+    return (start_c, advance_c), compile_time
 
 
 CHUNK_SECONDS = 0.1  # how long a chunk of compiled iterations aims to run

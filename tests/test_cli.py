@@ -105,6 +105,24 @@ def test_progress_bar_waits_then_draws():
     assert np.isfinite(bar.total)
 
 
+def test_main_leaves_the_process_settings_alone(tmp_path, capsys):
+    """``main(argv)`` runs in its caller's process and changes none of its settings (float64,
+    warnings' display); the console entry point, which pyproject's script and ``python -m
+    origami_jax`` run, makes them."""
+    import warnings
+    from pathlib import Path
+
+    import jax
+
+    show, x64 = warnings.showwarning, jax.config.jax_enable_x64
+    out = tmp_path / "c.fold"
+    argv = ["fold", "--example", "single_crease", "--out", str(out), "--quiet", "--float32"]
+    assert main(argv) == 0, capsys.readouterr().err
+    assert warnings.showwarning is show and jax.config.jax_enable_x64 == x64
+    pyproject = (Path(__file__).resolve().parents[1] / "pyproject.toml").read_text()
+    assert 'origami-jax = "origami_jax.cli:console_main"' in pyproject
+
+
 def test_import_changes_no_jax_flag():
     code = "import jax, origami_jax; print(jax.config.jax_enable_x64)"
     proc = subprocess.run(

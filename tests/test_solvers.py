@@ -335,40 +335,54 @@ def test_the_hand_over_takes_the_same_steps_as_an_iteration_spent():
     np.testing.assert_allclose(sparse.positions, dense.positions, atol=1e-10 * cp.diameter)
 
 
-def test_cholmod_blas_runs_this_cpus_kernels():
+def test_cholmod_blas_runs_this_cpus_kernels_when_tuned():
     """cvxopt's bundled OpenBLAS (0.3.15) takes its slowest kernels on CPUs newer than itself;
-    loaded through hostsparse it runs those that :func:`openblas_coretype` names for this CPU,
-    and the variable that told it so is gone again."""
+    after ``tune_process()`` hostsparse loads it (on first use) with those that
+    :func:`openblas_coretype` names for this CPU, and the variable that told it so is gone
+    again."""
 
     from origami_jax.solvers import hostsparse
 
     wanted = hostsparse.openblas_coretype()
     if "cholmod" not in hostsparse.available() or wanted is None:
         pytest.skip("needs cvxopt on an x86-64 CPU with AVX2")
-    if os.environ.get("OPENBLAS_CORETYPE"):
-        pytest.skip("OPENBLAS_CORETYPE set by the user")
-    running = hostsparse.cholmod_blas()
-    if running is None:
+    script = (
+        "import os, sys, origami_jax\n"
+        "from origami_jax.solvers import hostsparse\n"
+        "env = dict(os.environ)\n"
+        "print(origami_jax.tune_process(malloc=False, mkl_blocktime=False))\n"
+        "print('cvxopt' in sys.modules)\n"
+        "print(hostsparse.cholmod_blas())\n"
+        "print(dict(os.environ) == env)\n"
+    )
+    run = _run_python(script, without="OPENBLAS_CORETYPE")
+    assert run.returncode == 0, run.stderr[-3000:]
+    took, loaded, running, same_env = run.stdout.splitlines()
+    if running == "None":
         pytest.skip("this cvxopt build does not bundle OpenBLAS")
+    assert "'openblas_kernels': True" in took and loaded == "False"  # loaded on first use
     assert running.lower() == wanted.lower()
-    assert "OPENBLAS_CORETYPE" not in os.environ
+    assert same_env == "True"
 
 
 def test_cvxopt_loaded_first_on_its_slowest_kernels_is_reported():
-    """Imported after cvxopt, hostsparse cannot name the kernels; where OpenBLAS then runs its
-    slowest ones it warns, naming the variable that fixes it."""
+    """Tuned after cvxopt was loaded, hostsparse cannot name the kernels; where OpenBLAS then
+    runs its slowest ones it warns, naming the variable that fixes it, and says it did not
+    take."""
 
     from origami_jax.solvers import hostsparse
 
     if "cholmod" not in hostsparse.available() or hostsparse.openblas_coretype() is None:
         pytest.skip("needs cvxopt on an x86-64 CPU with AVX2")
     script = (
-        "import warnings, cvxopt\n"
+        "import warnings, cvxopt, origami_jax\n"
+        "from origami_jax.solvers import hostsparse\n"
         "with warnings.catch_warnings(record=True) as w:\n"
         "    warnings.simplefilter('always')\n"
-        "    from origami_jax.solvers import hostsparse\n"
+        "    took = origami_jax.tune_process(malloc=False, mkl_blocktime=False)\n"
         "print(hostsparse.cholmod_blas())\n"
         "print('|'.join(str(x.message) for x in w if x.category is RuntimeWarning))\n"
+        "print(took['openblas_kernels'])\n"
     )
     run = _run_python(script, without="OPENBLAS_CORETYPE")
     assert run.returncode == 0, run.stderr[-3000:]
@@ -376,6 +390,7 @@ def test_cvxopt_loaded_first_on_its_slowest_kernels_is_reported():
     if out[0].lower() != "prescott":
         pytest.skip(f"this CPU's kernels are recognised ({out[0]})")
     assert "OPENBLAS_CORETYPE=" in out[1] and "slowest" in out[1]
+    assert out[2] == "False"
 
 
 @pytest.mark.parametrize("backend", _BACKENDS)

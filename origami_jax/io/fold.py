@@ -90,7 +90,7 @@ import json
 import math
 import numbers
 import os
-import tempfile
+import secrets
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -836,15 +836,9 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     folder = path.parent
     if not folder.is_dir():
         raise FileNotFoundError(f"{path}: the folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(
-        dir=folder, prefix=f".{path.name}.", suffix=path.suffix if suffix is None else suffix
-    )
-    os.close(fd)
-    tmp_path = Path(tmp)
+    tmp_path = _new_file(folder, f".{path.name}.", path.suffix if suffix is None else suffix)
     try:
         yield tmp_path
-        with contextlib.suppress(OSError):
-            os.chmod(tmp_path, 0o666 & ~_UMASK)
         os.replace(tmp_path, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -852,13 +846,18 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
         raise
 
 
-def _read_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _read_umask()
+def _new_file(folder: Path, prefix: str, suffix: str) -> Path:
+    """A new empty file of a name no other has, created with mode ``0o666`` so that the system
+    takes the umask off (``tempfile.mkstemp`` makes ``0o600``, and reading the umask means
+    setting it, for every thread of the process)."""
+    for _ in range(1000):
+        candidate = folder / f"{prefix}{secrets.token_hex(6)}{suffix}"
+        try:
+            os.close(os.open(candidate, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
+        except FileExistsError:
+            continue
+        return candidate
+    raise FileExistsError(f"{folder}: no free temporary name")  # pragma: no cover
 
 
 def save_fold(path: str | os.PathLike, pattern_or_result: Any) -> None:

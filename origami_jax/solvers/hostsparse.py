@@ -4,7 +4,8 @@ The symmetric matrix comes as CSR arrays ``(indptr, indices, data)`` of its **up
 (diagonal included; the same arrays are the lower triangle's CSC, which CHOLMOD reads), already
 in a fill-reducing order (the nested dissection of
 :func:`origami_jax.solvers.newton.hessian_layout`), each row's column indices increasing.
-Three backends, the first available picked (:func:`backend`):
+Three backends, the first available picked (:func:`backend`), each looked for on the first sparse
+solve (or the first call that asks about backends), not when the package is imported:
 
 * **PARDISO** (Intel oneMKL's parallel direct solver, when MKL's runtime library
   ``libmkl_rt`` is installed: ``pip install "origami-jax[pardiso]"``, x86-64 only). It is
@@ -21,10 +22,14 @@ Three backends, the first available picked (:func:`backend`):
   factored the Hessian of a Miura-ori 100 x 100 (30,603 unknowns, 1.2 million stored entries)
   in 0.11 s and solved in 0.013 s, where SuperLU took 0.70 s for both (2026-12-02, best of 3,
   the same matrix). cvxopt is GPL-3 licensed; it is optional. Its wheels bundle an OpenBLAS
-  too old to know recent CPUs, which then runs its slowest kernels: cvxopt is loaded here with
-  this CPU's kernels named (see :func:`openblas_coretype`).
+  too old to know recent CPUs, which then runs its slowest kernels: with :func:`tune`'s
+  ``openblas_kernels`` (an opt-in, see :mod:`origami_jax.tuning`) cvxopt is loaded with this
+  CPU's kernels named (see :func:`openblas_coretype`).
 * **SuperLU** from scipy (a dependency of jax), in symmetric mode without pivoting, when
   neither is installed (a pivot that is not positive counts as a failure, as in Cholesky).
+
+Nothing here changes a process-wide setting unless asked to by :func:`tune` (the OpenBLAS
+kernels above; MKL's OpenMP threads not spinning after each PARDISO call).
 
 A factorization can be kept for a second right-hand side (Newton's geodesic acceleration):
 :func:`factor_solve` with ``keep=True`` returns a token, and :func:`resolve` solves with it
@@ -36,6 +41,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import importlib.util
 import itertools
 import os
 import platform
@@ -47,6 +53,8 @@ from collections import OrderedDict
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+
+from origami_jax.caches import on_clear
 
 
 def openblas_coretype() -> str | None:
@@ -76,11 +84,12 @@ def openblas_coretype() -> str | None:
 
 
 def _import_cholmod():
-    """cvxopt's CHOLMOD (or ``None``), its bundled OpenBLAS given this CPU's kernels: where
-    ``OPENBLAS_CORETYPE`` is unset and cvxopt not yet loaded, the variable is set while cvxopt
-    loads (OpenBLAS reads it then) and removed again, so no other library sees it."""
+    """cvxopt's CHOLMOD (or ``None``), its bundled OpenBLAS given this CPU's kernels where
+    :func:`tune` asked for them: where ``OPENBLAS_CORETYPE`` is unset and cvxopt not yet
+    loaded, the variable is set while cvxopt loads (OpenBLAS reads it then) and removed again,
+    so no other library sees it."""
     coretype = None
-    if "OPENBLAS_CORETYPE" not in os.environ and "cvxopt" not in sys.modules:
+    if _named_kernels_wanted() and "cvxopt" not in sys.modules:
         coretype = openblas_coretype()
     try:
         if coretype is not None:
@@ -95,19 +104,51 @@ def _import_cholmod():
             del os.environ["OPENBLAS_CORETYPE"]
 
 
-# optional: CHOLMOD
-_cholmod, _cvx_matrix, _cvx_spmatrix = _import_cholmod()
+_UNLOADED = object()  # a backend not looked for yet
+_LOAD_LOCK = threading.Lock()
+# optional: PARDISO (MKL's runtime library) and CHOLMOD (cvxopt), loaded on first use
+_mkl = _cholmod = _UNLOADED
+_cvx_matrix = _cvx_spmatrix = None
+# opt-ins of tune(); process-wide effects, so off unless asked for
+_TUNING = {"openblas_kernels": False, "mkl_blocktime": False}
+
+
+def _mkl_lib():
+    """MKL's runtime library (with ``pardiso_64``) or ``None``; looked for on the first call."""
+    global _mkl
+    if _mkl is _UNLOADED:
+        with _LOAD_LOCK:
+            if _mkl is _UNLOADED:
+                _mkl = _load_mkl()
+    return _mkl
+
+
+def _cholmod_lib():
+    """cvxopt's ``cholmod`` module or ``None``; imported on the first call."""
+    global _cholmod, _cvx_matrix, _cvx_spmatrix
+    if _cholmod is _UNLOADED:
+        with _LOAD_LOCK:
+            if _cholmod is _UNLOADED:
+                _cholmod, _cvx_matrix, _cvx_spmatrix = _import_cholmod()
+    return _cholmod
+
+
+def _named_kernels_wanted() -> bool:
+    """Whether cvxopt is to load with this CPU's OpenBLAS kernels named (see :func:`tune`)."""
+    return _TUNING["openblas_kernels"] and "OPENBLAS_CORETYPE" not in os.environ
 
 
 def cholmod_blas() -> str | None:
     """The kernels that the OpenBLAS bundled with cvxopt runs (its ``openblas_get_corename``,
-    e.g. ``"SkylakeX"``), or ``None`` (no cvxopt, or a build without its own OpenBLAS)."""
-    if _cholmod is None:
+    e.g. ``"SkylakeX"``), or ``None`` (no cvxopt, or a build without its own OpenBLAS). Loads
+    cvxopt if not yet loaded."""
+    cholmod = _cholmod_lib()
+    if cholmod is None:
         return None
     import ctypes
     import glob
 
-    libs = os.path.join(os.path.dirname(_cholmod.__file__), os.pardir, "cvxopt.libs")
+    libs = os.path.join(os.path.dirname(cholmod.__file__), os.pardir, "cvxopt.libs")
     for path in sorted(glob.glob(os.path.join(libs, "libopenblas*"))):
         try:
             blas = ctypes.CDLL(path)
@@ -118,23 +159,53 @@ def cholmod_blas() -> str | None:
     return None
 
 
-def _warn_if_slowest_kernels() -> None:
-    """cvxopt loaded before this module runs the kernels OpenBLAS detected; say so when those
-    are its slowest while this CPU has better ones."""
-    if _cholmod is None or "OPENBLAS_CORETYPE" in os.environ:
-        return
+def _named_kernels_run() -> bool:
+    """Whether cvxopt, already loaded, runs this CPU's kernels; a warning where it runs
+    OpenBLAS's slowest instead (nothing changes them in this process any more)."""
     wanted, running = openblas_coretype(), cholmod_blas()
-    if wanted is not None and running is not None and running.lower() == "prescott":
+    if wanted is None or running is None:
+        return False
+    if running.lower() == "prescott":
         warnings.warn(
             f"cvxopt's bundled OpenBLAS runs its slowest kernels ({running}) on this CPU, which "
-            f"has {wanted}'s: sparse Newton solves (CHOLMOD) take about twice as long. Import "
-            f"origami_jax before cvxopt, or set OPENBLAS_CORETYPE={wanted} before Python starts.",
+            f"has {wanted}'s: sparse Newton solves (CHOLMOD) take about twice as long. Opt in "
+            f"before cvxopt is first imported, or set OPENBLAS_CORETYPE={wanted} before Python "
+            f"starts.",
             RuntimeWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
+    return running.lower() == wanted.lower()
 
 
-_warn_if_slowest_kernels()
+def tune(openblas_kernels: bool = True, mkl_blocktime: bool = True) -> dict[str, bool]:
+    """Opt in to the sparse backends' process-wide tuning (off by default; documented with the
+    others in :mod:`origami_jax.tuning`, whose :func:`~origami_jax.tuning.tune_process` calls
+    this). ``False`` leaves a setting as it is.
+
+    * ``openblas_kernels``: load cvxopt (CHOLMOD) with this CPU's OpenBLAS kernels named
+      (``OPENBLAS_CORETYPE`` set only while cvxopt loads, only where unset). cvxopt must not
+      be loaded yet; where it was, on OpenBLAS's slowest kernels, this warns.
+    * ``mkl_blocktime``: before each PARDISO call, ``kmp_set_blocktime(0)`` on the calling
+      thread (unless ``KMP_BLOCKTIME`` is set), so MKL's OpenMP threads sleep at once instead of
+      spinning on the cores that XLA computes on next. The OpenMP runtime is shared with any
+      other library that uses Intel's.
+
+    Returns which of the two are in effect: ``openblas_kernels`` true where cvxopt runs (or will
+    load with) this CPU's kernels by this setting, ``mkl_blocktime`` where the calls will set it.
+    """
+    if openblas_kernels:
+        _TUNING["openblas_kernels"] = True
+    if mkl_blocktime:
+        _TUNING["mkl_blocktime"] = True
+    if _cholmod is not _UNLOADED or "cvxopt" in sys.modules:
+        named = _named_kernels_wanted() and _named_kernels_run()
+    else:  # to be loaded so, where installed
+        installed = importlib.util.find_spec("cvxopt") is not None
+        named = _named_kernels_wanted() and installed and openblas_coretype() is not None
+    return {
+        "openblas_kernels": named,
+        "mkl_blocktime": _TUNING["mkl_blocktime"] and "KMP_BLOCKTIME" not in os.environ,
+    }
 
 
 def _load_mkl():
@@ -171,10 +242,6 @@ def _load_mkl():
     return None
 
 
-# optional: PARDISO
-_mkl = _load_mkl()
-
-
 @functools.cache
 def _blocktime_setter(lib):
     """``kmp_set_blocktime`` of the OpenMP runtime that MKL's threads run on, or ``None``:
@@ -196,13 +263,14 @@ def _blocktime_setter(lib):
 
 def mkl_version() -> str | None:
     """The version of the MKL that PARDISO runs from (e.g. ``"2026.2"``), or ``None``."""
-    if _mkl is None:
+    mkl = _mkl_lib()
+    if mkl is None:
         return None
     import ctypes
     import re
 
     text = ctypes.create_string_buffer(256)
-    _mkl.mkl_get_version_string(text, len(text))
+    mkl.mkl_get_version_string(text, len(text))
     found = re.search(r"Version ([0-9][0-9.]*)", text.value.decode(errors="replace"))
     return found.group(1) if found else "unknown"
 
@@ -219,6 +287,7 @@ __all__ = [
     "solve",
     "superlu",
     "symmetric_matrix",
+    "tune",
     "using",
 ]
 
@@ -229,16 +298,16 @@ _SPARE = 2  # released factors a pattern keeps for reuse (each holds a numeric f
 def backend() -> str:
     """``"pardiso"`` when MKL is installed, else ``"cholmod"`` when cvxopt is, else
     ``"superlu"``."""
-    if _mkl is not None:
+    if _mkl_lib() is not None:
         return "pardiso"
-    return "superlu" if _cholmod is None else "cholmod"
+    return "superlu" if _cholmod_lib() is None else "cholmod"
 
 
 def available() -> tuple[str, ...]:
     """The installed backends, the one in use first (see :func:`backend`)."""
     return tuple(
         name
-        for name, lib in (("pardiso", _mkl), ("cholmod", _cholmod), ("superlu", True))
+        for name, lib in (("pardiso", _mkl_lib()), ("cholmod", _cholmod_lib()), ("superlu", 1))
         if lib is not None
     )
 
@@ -255,7 +324,7 @@ def using(name: str):
       'superlu'
     """
     global _mkl, _cholmod
-    if name not in available():
+    if name not in available():  # both looked for: saved and restored below
         raise ValueError(f"host sparse backend {name!r} is not installed: {available()}")
     saved = _mkl, _cholmod
     if name != "pardiso":
@@ -303,7 +372,7 @@ class _PardisoFactor:
     def __init__(self, pattern: _Pardiso):
         self.n, self.ia, self.ja, self.perm = pattern.n, pattern.ia, pattern.ja, pattern.perm
         # the library it was made with: released through it even after a switch of backend
-        self.lib, self.set_blocktime = _mkl, _blocktime_setter(_mkl)
+        self.lib = _mkl_lib()
         self.handle = np.zeros(64, np.int64)  # PARDISO's internal pointers, zero before use
         self.iparm = np.zeros(64, np.int64)
         # our own settings (iparm[0]); the matrix's order as the user's permutation (iparm[4]),
@@ -326,11 +395,12 @@ class _PardisoFactor:
         def int_(v):
             return ctypes.byref(ctypes.c_int64(v))
 
-        if self.set_blocktime is not None and "KMP_BLOCKTIME" not in os.environ:
-            # MKL's threads otherwise spin for 200 ms after each call, on the cores that XLA's
-            # threads compute on next (a 100 x 100 fold: 1.58-1.92 s, then 1.41-1.57 s); this
-            # thread's teams only
-            self.set_blocktime(0)
+        if _TUNING["mkl_blocktime"] and "KMP_BLOCKTIME" not in os.environ:
+            # opted in (tune): MKL's threads otherwise spin for 200 ms after each call, on the
+            # cores that XLA's threads compute on next; this thread's teams only
+            set_blocktime = _blocktime_setter(self.lib)
+            if set_blocktime is not None:
+                set_blocktime(0)
         self.lib.pardiso_64(
             self.handle, int_(1), int_(1), int_(2), int_(phase), int_(n), values, self.ia, self.ja,
             self.perm, int_(1), self.iparm, int_(0), b, x, ctypes.byref(error),
@@ -397,7 +467,7 @@ class _Cholmod(_Pattern):
 
     def __init__(self, indptr: np.ndarray, indices: np.ndarray):
         super().__init__(indptr, indices)
-        self.lib = _cholmod  # kept factors solve through it even after a switch of backend
+        self.lib = _cholmod_lib()  # kept factors solve through it after a switch of backend
         n = indptr.shape[0] - 1
         rows = np.repeat(np.arange(n), np.diff(indptr))
         # the upper triangle's CSR, row by row, is the lower triangle's CSC
@@ -452,9 +522,17 @@ _TOKENS = itertools.count(1)
 _LOCK = threading.Lock()  # callbacks may come from several threads (devices)
 
 
+@on_clear
+def _clear_patterns() -> None:
+    """Drop the patterns' analyses and spare factors (origami_jax.clear_caches); kept
+    factorizations hold their own."""
+    with _LOCK:
+        _PATTERNS.clear()
+
+
 def _pattern(indptr: np.ndarray, indices: np.ndarray) -> _Pattern | None:
     """The pattern's analysis by the backend in use; ``None``: SuperLU."""
-    kind = _Pardiso if _mkl is not None else _Cholmod if _cholmod is not None else None
+    kind = {"pardiso": _Pardiso, "cholmod": _Cholmod}.get(backend())
     if kind is None:
         return None
     for p in _PATTERNS:

@@ -72,6 +72,7 @@ import scipy.sparse as sp
 from jax import Array
 
 from origami_jax.barrier import S_MIN, rest_areas
+from origami_jax.caches import LruCache
 from origami_jax.energy import (
     Reference,
     Structure,
@@ -243,7 +244,7 @@ def nested_dissection(xy: np.ndarray, adjacency: sp.csr_matrix, leaf: int = 16) 
     return np.concatenate(out)
 
 
-_LAYOUTS: dict = {}
+_LAYOUTS = LruCache()  # the most recently used meshes' layouts (origami_jax.caches)
 
 
 def hessian_layout(mesh: Mesh, structure: Structure, sparse: bool) -> HessianLayout:

@@ -1,0 +1,60 @@
+"""Process-wide settings that make large sheets faster: explicit opt-ins, all listed here.
+
+Importing :mod:`origami_jax` changes no environment variable, no thread setting, no allocator
+setting and no JAX flag, and loads no sparse backend (MKL's PARDISO and cvxopt's CHOLMOD are
+looked for on the first sparse solve). Each setting below changes something the whole process
+shares, so the library never makes it by itself; :func:`tune_process` opts in to all of them,
+and the command line (``origami-jax``) and the benchmarks call it:
+
+* **malloc** (:func:`origami_jax.memory.keep_freed_memory`): glibc's ``malloc`` keeps large
+  freed blocks in its heap instead of unmapping them, so a Newton iteration on a large sheet
+  stops paying the page faults of fresh buffers (about a fifth faster on a 100 x 100
+  Miura-ori); the process keeps its peak heap. Or set ``MALLOC_MMAP_THRESHOLD_`` and
+  ``MALLOC_TRIM_THRESHOLD_`` before Python starts.
+* **OpenBLAS kernels** (:func:`origami_jax.solvers.hostsparse.tune`, ``openblas_kernels``):
+  cvxopt's wheels bundle an OpenBLAS too old to know recent CPUs, which then runs its slowest
+  kernels (CHOLMOD about twice as slow). Opted in, cvxopt is loaded with this CPU's kernels
+  named: ``OPENBLAS_CORETYPE`` is set only while cvxopt loads, only where you have not set it,
+  and only if cvxopt is not loaded yet (it warns where it was, on the slowest kernels). Or set
+  ``OPENBLAS_CORETYPE`` (see :func:`~origami_jax.solvers.hostsparse.openblas_coretype`) before
+  Python starts.
+* **MKL's thread wait** (:func:`origami_jax.solvers.hostsparse.tune`, ``mkl_blocktime``): after
+  a parallel region, the OpenMP threads that PARDISO runs on spin for 200 ms by default, on the
+  cores that XLA computes on next. Opted in, each PARDISO call first sets
+  ``kmp_set_blocktime(0)`` for the calling thread's teams (unless ``KMP_BLOCKTIME`` is set), on
+  Intel's OpenMP runtime, which other libraries in the process may share. A large sheet's
+  Newton fold with PARDISO takes about a tenth less time with it (see the README). Or set
+  ``KMP_BLOCKTIME=0`` before Python starts.
+
+The command line also turns on JAX's float64 (``jax_enable_x64``) and, with ``--cache``, its
+persistent compilation cache, and prints warnings on one line: in its console entry point
+(:func:`origami_jax.cli.console_main`), not in :func:`origami_jax.cli.main`.
+
+Example:
+  >>> import origami_jax
+  >>> sorted(origami_jax.tune_process())  # doctest: +SKIP
+  ['malloc', 'mkl_blocktime', 'openblas_kernels']
+"""
+
+from __future__ import annotations
+
+from origami_jax.memory import keep_freed_memory
+from origami_jax.solvers import hostsparse
+
+__all__ = ["tune_process"]
+
+
+def tune_process(
+    malloc: bool = True, openblas_kernels: bool = True, mkl_blocktime: bool = True
+) -> dict[str, bool]:
+    """Opt in to the process-wide settings of this module's docstring (``False``: leave that one
+    as it is). Call it early: the OpenBLAS kernels can only be named before cvxopt is first
+    imported. Returns, for each setting, whether it was asked for and is in effect (``False``
+    where one cannot take: not glibc, cvxopt loaded earlier, a variable of yours set, ...)."""
+    took = {"malloc": keep_freed_memory() if malloc else False}
+    took.update(hostsparse.tune(openblas_kernels=openblas_kernels, mkl_blocktime=mkl_blocktime))
+    if not openblas_kernels:
+        took["openblas_kernels"] = False
+    if not mkl_blocktime:
+        took["mkl_blocktime"] = False
+    return took
