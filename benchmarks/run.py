@@ -7,6 +7,7 @@
     python benchmarks/run.py --part svg         # every solver on the shared SVG files
     python benchmarks/run.py --part batch       # fold_batch against a loop (benchmarks/batch.py)
     python benchmarks/run.py --part linear      # Newton's systems: direct vs PCG (linear.py)
+    python benchmarks/run.py --part extreme     # stiff and scaled shared files (extreme.py)
 
 Cases: the seed's scene, Miura-ori 10 x 10, 30 x 30 and 100 x 100, a Yoshimura, a Kresling, and
 every FOLD file under ../shared/patterns that loads (skipped when that folder is absent); the
@@ -143,6 +144,7 @@ PARTS = {
     "svg": (svg_cases, "svg_", True, 30.0),
     "batch": (None, "batch_", True, None),  # benchmarks/batch.py
     "linear": (None, "linear_", True, None),  # benchmarks/linear.py
+    "extreme": (None, "extreme_", True, None),  # benchmarks/extreme.py
 }
 
 
@@ -211,7 +213,7 @@ def main(argv=None) -> int:
         if args.part != part:
             continue
         max_time = max_time if args.max_time is None else args.max_time
-        if part in ("batch", "linear"):  # their own scripts, beside this one (on sys.path)
+        if part in ("batch", "linear", "extreme"):  # their own scripts, beside this one
             module = __import__(part)
             module.main(out, quick=args.quick)
             continue

@@ -135,11 +135,16 @@ def next_status(converged: Array, finite: Array, stalled: Array) -> Array:
 
 def gradient_floor(problem: Problem) -> Array:
     """The size below which a gradient entry is rounding noise: twice eps times the largest sum,
-    over a vertex's bars, of their stiffness ``axial / l0`` times length. Each bar force is
-    computed from ``l - l0``, whose rounding is eps ``l0`` even at rest; in float32 with stiff
-    bars this lies above ``tol`` times the start gradient, and no solver can go below it."""
+    over a vertex's bars, of their stiffness ``axial / l0`` times the coordinates' size (at
+    least ``l0``). Each bar force is computed from ``l - l0``, and ``l`` from differences of
+    coordinates, whose rounding is eps times the coordinates' size even at rest: on a sheet of
+    many short bars (or one placed far from the origin) that is many times eps ``l0``. With
+    stiff bars this lies above ``tol`` times the start gradient, and no solver can go below
+    it."""
     params, bars = problem.params, problem.structure.bars
-    force = jnp.broadcast_to(params.stiffness.axial, params.rest_length.shape)
+    size = jnp.max(jnp.abs(problem.start))
+    l0 = params.rest_length
+    force = params.stiffness.axial * jnp.maximum(1.0, size / jnp.where(l0 > 0, l0, size))
     per_vertex = jax.ops.segment_sum(
         jnp.concatenate([force, force]), bars.T.reshape(-1), num_segments=problem.start.shape[0]
     )
