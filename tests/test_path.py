@@ -183,3 +183,16 @@ def test_a_direct_solve_through_pi_is_followed_again_from_flat():
     assert np.all(np.diff(result.history["wall_time"]) >= 0)
     # the user's choice of barriers stands in the second try
     assert fold(cp, percent=1.78, barriers=False).barriers == Barriers(0, 0)
+
+
+def test_a_shared_tessellation_reaches_its_zero_energy_state_when_stiff(shared_patterns):
+    # Origami Simulator's waterbomb tessellation (its targets reachable: the defaults fold it
+    # to 1e-11 rad) at axial : crease 1e6 and 1e8: its bars' rounding, from coordinates ten
+    # times their length, is above tol there, and the solve ends at that floor, converged
+    cp = io.load(shared_patterns / "origami-simulator" / "Tessellations" / "waterbomb.svg")
+    for ratio in (1e6, 1e8):
+        stiffness = {"axial": 1.0, "facet": 20.0 / ratio, "crease": 1.0 / ratio}
+        result = fold(cp, stiffness=stiffness)
+        assert result.converged, (ratio, result.reason)
+        assert result.fold_angle_error_max <= 1e-6, ratio
+        assert len(result.through_pi) == 0 and len(result.collapsed) == 0
