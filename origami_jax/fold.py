@@ -445,7 +445,8 @@ def fold(
         steps (the states in ``result.frames``); ``"direct"``: one solve at the full percent;
         ``"auto"`` (default): continuation with Newton where the scene has barriers by default
         and the start is the unfolded sheet, else direct; a direct Newton solve from the
-        unfolded sheet that stalls, or ends with a crease through pi or a collapsed triangle,
+        unfolded sheet that stalls (in float64), or ends with a crease through pi or a
+        collapsed triangle,
         is then followed from flat (with the barriers, unless ``barriers=False``), and its
         time and iterations count in the result's.
 
@@ -534,7 +535,7 @@ def fold(
             time.perf_counter() - t0,
             [],
         )
-        warning = _warning_sign(solved, mesh)
+        warning = _warning_sign(solved, mesh, dtype)
         if retry and warning is not None and solved.iterations < max_iter:
             if warning != "stalled" and barriers is None:
                 structure = make_structure(mesh, True)  # what went wrong is what they prevent
@@ -649,14 +650,15 @@ def _shifted(on_chunk, offset: int, iterations: int, sample: dict) -> None:
     on_chunk(offset + iterations, sample)
 
 
-def _warning_sign(solved: _Solved, mesh) -> str | None:
+def _warning_sign(solved: _Solved, mesh, dtype) -> str | None:
     """What makes a direct solve from flat worth following again from flat: it stalled (or met
-    a non-finite value), a crease went through itself, or a triangle collapsed; else ``None``
-    (converged and clean, or cut short by the user's limits)."""
+    a non-finite value) in float64, a crease went through itself, or a triangle collapsed; else
+    ``None`` (converged and clean, or cut short by the user's limits)."""
     status = int(solved.state.status)
     if status == Status.RUNNING:  # the user's limits: no time or iterations for another try
         return None
-    if status in (Status.STALLED, Status.NONFINITE):
+    # float32 stalls at its own rounding on a large sheet: the path would not lift that
+    if status in (Status.STALLED, Status.NONFINITE) and dtype == jnp.float64:
         return "stalled"
     if np.any(np.abs(solved.angles) > np.pi + HINGE_GAP):
         return "through pi"
