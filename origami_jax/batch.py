@@ -29,16 +29,12 @@ devices; inside the loop, a few slots at a time, those whose problem has stopped
 result out and take the next problem of the queue (continuous batching: no slot waits for the
 slowest member of a chunk, nor for the host). The queue takes the problems that fold furthest
 first (:func:`_fold_extents`): slots of like problems waste less of each vmapped iteration, and
-the last problems to enter finish quickly. On 2026-12-06 (4 CPU devices, 6 alternating rounds)
-that order folded the benchmark's waterbomb set 1,698 folds/s against 1,393 in input order, the
-Miura-ori set 3,218 against 2,966 (medians). With several devices the slots and the queue are
+the last problems to enter finish quickly. With several devices the slots and the queue are
 split across them (``jax.shard_map``). Each call runs about a tenth of a second of iterations;
 the next one is dispatched before the host reads the results of the last, shows progress and
 hands the finished problems on; an interrupted batch (Ctrl-C) returns the problems already
 done. Few slots suit CPUs (:data:`CPU_SLOTS`, 32 per device: one device's slots stay in its
-caches): on 2026-12-04 (``benchmarks/batch.py``, 2 CPU devices, 32 slots) 1,024 Miura-ori
-4 x 4 variants folded at 2,147 folds/s, where slots refilled by the host between calls (256
-of them, the design before) reached 1,086.
+caches) (measured: docs/design-notes/measurements.md).
 
 Example:
   >>> from origami_jax import fold_batch, patterns
@@ -405,11 +401,8 @@ def compile_count() -> int:
 
 
 # default slots per device: on CPUs few, so that one device's slots stay in its caches (with
-# continuous batching nothing is gained by more); elsewhere (GPUs) many. 32 per CPU device
-# against 16, 2026-12-06 (2 devices, the benchmark's 1,024-problem sets, fold_batch calls
-# alternating in one process, medians of 5 to 7 rounds): waterbomb 2 x 2 +3 to +8 % in four
-# runs, Miura-ori 4 x 4 -1 and +7 % in two; 64 per device gave the waterbomb less than 32 in
-# both runs that compared them
+# continuous batching nothing is gained by more); elsewhere (GPUs) many (32 per CPU device:
+# docs/design-notes/measurements.md)
 CPU_SLOTS = 32
 SLOTS = 256
 
@@ -900,9 +893,7 @@ def _sharded(fn, devices: list, in_axes: tuple, out_axes: tuple):
 
 def _entry_width(slots: int) -> int:
     """How many of a device's slots enter and exit at once: one per 16 slots. A CPU device's 16
-    slots then settle as soon as one has stopped (2026-12-05, 2 CPU devices, 1,024 problems,
-    one process alternating: 1,352 against 1,273 folds/s with 2 at a time for the waterbomb
-    set, and 2,614 against 2,523 with 8 at a time for the Miura-ori's)."""
+    slots then settle as soon as one has stopped (measured: docs/design-notes/measurements.md)."""
     return max(1, slots // 16)
 
 

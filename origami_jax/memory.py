@@ -7,9 +7,7 @@ operating system and returns them on ``free``, so every iteration pays the page 
 touching them again. :func:`keep_freed_memory` raises that threshold (and the heap's trim
 threshold above it), so freed blocks stay in the heap and are reused.
 
-Measured on this project's 2-core machine (2026-12-05, Miura-ori 100 x 100, Newton, float64,
-15 iterations, min of 4 solves, two alternating rounds): 2.40 / 2.48 s plain, 1.94 / 1.94 s
-after ``keep_freed_memory()``. The cost: the process keeps its peak heap instead of handing
+The cost: the process keeps its peak heap instead of handing
 freed memory back. A process-wide setting, so the library never makes it on its own: call it,
 or :func:`origami_jax.tune_process`, which makes the other opt-ins of :mod:`origami_jax.tuning`
 too (the command-line interface and the benchmarks do), or set ``MALLOC_MMAP_THRESHOLD_`` and

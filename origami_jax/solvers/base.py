@@ -160,8 +160,7 @@ def has_converged(
 ) -> Array:
     """``grad_norm_rel <= tol``, or the gradient is down to its rounding noise (with
     ``previous``, the last iterate's ``grad_max``: there too, for a method whose step still
-    gains there, as Newton's does: measured, one more Newton step from the floor took a stiff
-    Miura-ori from 4.4e-9 to 3.5e-11 rad, a float32 one from 1.1e-4 to 3.6e-7 rad).
+    gains there, as Newton's does).
     ``floor``: a further rounding floor to add (the hinges' and barriers':
     :func:`element_floor`)."""
     floor = gradient_floor(problem) + floor

@@ -11,17 +11,14 @@ solve (or the first call that asks about backends), not when the package is impo
   ``libmkl_rt`` is installed: ``pip install "origami-jax[pardiso]"``, x86-64 only). It is
   called through ``ctypes`` (its 64-bit-integer entry ``pardiso_64``), given this order as the
   user's permutation. Each PARDISO handle is analysed once and then only factors numerically;
-  a pattern keeps up to two spare handles for the next calls. On
-  this project's 2-core machine (2026-12-05, an Intel Xeon with AVX-512) it factored the
-  Hessian of a Miura-ori 100 x 100 in 36-45 ms and solved in 3-7 ms, where CHOLMOD took
-  86-100 ms and 5-11 ms (the same matrix, the same process). MKL is free to use and
+  a pattern keeps up to two spare handles for the next calls. (timings:
+  docs/design-notes/measurements.md). MKL is free to use and
   redistribute under Intel's Simplified Software License; it is optional.
 * **CHOLMOD** (supernodal Cholesky, from ``cvxopt`` when it is installed:
   ``pip install "origami-jax[cholmod]"``). Its symbolic analysis is done once per sparsity
-  pattern and kept; each call only factors numerically. On this project's 2-core machine it
-  factored the Hessian of a Miura-ori 100 x 100 (30,603 unknowns, 1.2 million stored entries)
-  in 0.11 s and solved in 0.013 s, where SuperLU took 0.70 s for both (2026-12-02, best of 3,
-  the same matrix). cvxopt is GPL-3 licensed; it is optional. Its wheels bundle an OpenBLAS
+  pattern and kept; each call only factors numerically. (timings:
+  docs/design-notes/measurements.md). cvxopt is GPL-3 licensed; it is optional. Its wheels bundle
+  an OpenBLAS
   too old to know recent CPUs, which then runs its slowest kernels: with :func:`tune`'s
   ``openblas_kernels`` (an opt-in, see :mod:`origami_jax.tuning`) cvxopt is loaded with this
   CPU's kernels named (see :func:`openblas_coretype`).
@@ -62,11 +59,8 @@ def openblas_coretype() -> str | None:
     ``"Haswell"`` with AVX2 and FMA), or ``None`` (not x86-64, or features unknown).
 
     cvxopt's wheels bundle OpenBLAS 0.3.15, which does not recognise CPUs newer than itself
-    and then falls back to its slowest kernels ("Prescott"). On this project's 2-core machine
-    on 2026-12-05 (an Intel Xeon of family 6, model 207, with AVX-512) that BLAS ran a
-    1,000 x 1,000 dgemm at 18 GFlop/s (69 with the SkylakeX kernels) and CHOLMOD took
-    182-191 ms to factor and solve the Hessian of a Miura-ori 100 x 100, 100-121 ms with the
-    SkylakeX or Haswell kernels; a fold of that sheet took 4.0-4.4 s, then 2.4-2.9 s."""
+    and then falls back to its slowest kernels ("Prescott"). (measured:
+    docs/design-notes/measurements.md)."""
     if platform.machine().lower() not in ("x86_64", "amd64"):
         return None
     try:  # numpy's table of the CPU's features (numpy 2; numpy 1 named its module core)

@@ -12,19 +12,14 @@ Hessian can be indefinite, so the method works with two matrices:
   and no longer one (the quadratic region: a step that the line search could double, see
   ``expansions``, shows the convex part still overstating the curvature, where the exact
   Hessian is mostly indefinite), and kept as long as it gives a descent step that the line
-  search accepts whole; otherwise the iteration falls back to the convex part. Waiting for an
-  unexpanded step (with ``convex_rate`` 0, see there), measured on 2026-12-04 against stop 26:
-  1,024 waterbomb 2 x 2 variants (``fold_batch``)
-  15.2 -> 13.2 mean iterations; single folds of the benchmark scenes and shared files equal
-  or fewer iterations but for a few (box.fold 61 -> 52, BoxPleatInOutWave 154 -> 139,
-  Miura-ori 30 x 30 14 -> 12, 100 x 100 16 -> 15; popupSimple 20 -> 28, flappingBird
-  52 -> 60). An
+  search accepts whole; otherwise the iteration falls back to the convex part. (Measured:
+  docs/design-notes/measurements.md.) An
   exact Hessian that does not factor (not positive definite) hands over to the convex part
-  within the same iteration when it is factored on the host (sparse, large patterns: an
-  iteration less each, Miura-ori 30 x 30 14 -> 11, 100 x 100 20 -> 17); dense, the failed
+  within the same iteration when it is factored on the host (sparse, large patterns); dense, the
+  failed
   attempt costs the iteration. After the n-th rejected exact attempt in a row the next waits
-  for 2^n - 1 full convex steps (at most 15): on box.fold, where they alternated, that took
-  259 iterations down to 59. After ``shift_after`` rejections in a row, exact attempts are
+  for 2^n - 1 full convex steps (at most 15). After ``shift_after`` rejections in a row, exact
+  attempts are
   shifted (see there). Far from equilibrium an exact attempt is skipped (the iteration takes the
   convex part, and no rejection is counted) where the compressed bars at some vertex outweigh
   the out-of-plane support of its hinges (``buckling_ratio``): there the exact Hessian is
@@ -33,9 +28,8 @@ Hessian can be indefinite, so the method works with two matrices:
 A Levenberg-Marquardt shift ``mu * |diag(H)|`` (``mu`` from ``mu_min``, grown 10x, from at least
 1e-10, whenever no step is found, and shrunk 10x with every step taken) keeps the system
 non-singular on mechanisms and free hinges. Its floor ``mu_min`` is 0: a shift that stays
-(1e-10 did, to stop 17) makes the last iterations converge linearly where the exact step
-converges quadratically (Miura-ori 100 x 100: 1.3e-6, 1.4e-8, 1.6e-10 rad against 4.3e-7,
-3.5e-11, 3.9e-14 rad). Rigid motions are gauged out as in the other solvers (the pinned
+makes the last iterations converge linearly where the exact step
+converges quadratically. Rigid motions are gauged out as in the other solvers (the pinned
 vertices' blocks are projected, their complement set to a stiffness-sized identity); but a step
 that would turn the sheet (by more than ``free_turn``) is taken free of the gauge: its
 infinitesimal rigid motion is removed, the sheet moves, and each piece is then turned rigidly
@@ -876,51 +870,34 @@ class Newton:
         rest length (about the largest rotation of any piece of paper per step, radians).
       acceleration: geodesic acceleration (see ``_attempt``): the largest ``2 |a| / |v|`` of the
         second-order correction ``a`` to the step ``v`` that is used; 0 turns it off. It costs
-        a second solve with the same factorization. Measured on 2026-12-02: Miura-ori 4 x 4
-        20 -> 10 iterations, 100 x 100 82 -> 47; the seed's scene 23 -> 13; at an axial :
-        crease stiffness ratio of 1e6, a 3 x 3 Miura-ori 178 -> 38.
+        a second solve with the same factorization.
       expansions: doublings of a step that passed at full length: while the energy falls by
         more than rounding and no bar turns past ``max_turn``, the step is doubled, up to this
         many times (0: never). Far from equilibrium the convex part of the Hessian overstates
         the curvature along a sheet's soft modes, so its full steps fall short; near one, the
         doubled Newton step raises the energy and is not taken. Each doubling tried costs one
-        energy evaluation. Measured on 2026-12-03 (with gauge-free steps): the Kresling
-        25 -> 23 iterations, Origami Simulator's BoxPleatInOutWave 218 -> 165; but Miura-ori
-        100 x 100 15 -> 20 (30 x 30: 14 either way). A doubled step also postpones the next
+        energy evaluation. A doubled step also postpones the next
         exact attempt (see the module docstring).
       free_turn: a step whose rigid part turns a piece by more than this (radians per unit
         step) is taken free of the gauge and the result reframed. Pinned, a step turns the
         whole sheet about one triangle by a linearized rotation, which stretches it: on a
         Miura-ori, whose panels all tilt as it folds, that left a crumpled patch around the
-        pinned triangle to smooth out over many iterations (measured on 2026-12-03, pinned ->
-        free: Miura-ori 10 x 10 16 -> 12 iterations, 30 x 30 19 -> 14, 100 x 100 32 -> 20;
-        the waterbomb 2 x 2 19 -> 15; the seed's scene 11 either way; the square twist
-        12 -> 15, the Kresling 21 -> 23). Small steps stay pinned: reframing moves every
+        pinned triangle to smooth out over many iterations. Small steps stay pinned: reframing
+        moves every
         vertex by a rotation found from one small triangle, whose rounding would raise the
         gradient's noise floor (float32 Miura-ori 10 x 10 stalled above it). ``inf``: never.
       convex_rate: an iteration that lowers the energy to below this fraction of its value
         keeps the next one on the convex part (exact attempts resume once the energy falls
         more slowly): near a zero-residual solution (rigid-foldable patterns) the convex part
         (Gauss-Newton) converges about as fast as the exact Hessian, without the curvature
-        terms' cost. 0 (the default): exact attempts after every unexpanded full step. Before
-        exact attempts waited for an unexpanded step, 0.5 was the default (measured on
-        2026-12-04, 0 -> 0.5: 1,024 Miura-ori 4 x 4 variants 7.13 -> 6.92 mean iterations);
-        since, on 2026-12-04, 0.5 -> 0: Miura-ori 100 x 100 19 -> 15 iterations (3.2 -> 2.8 s),
-        30 x 30 14 -> 12; the Miura-ori variants 6.87 -> 6.79, the waterbomb variants 13.16 ->
-        13.23 mean iterations; popupSimple 20 -> 28.
+        terms' cost. 0 (the default): exact attempts after every unexpanded full step.
       shift_after: after this many exact attempts in a row are rejected (not positive
         definite, or no step accepted), the next ones add a Levenberg-Marquardt shift
         ``shift * |diag(H)|`` to the exact Hessian: ``shift_min`` at first, 10x more with each
         further rejection (at most 1e10), 10x less with each exact step taken (0 once below a
         thousandth of ``shift_min``). A pattern whose exact Hessian stays slightly indefinite
-        along a flat valley otherwise crawls there on convex steps. Measured on 2026-12-05 (Newton,
-        float64, every shared file): Origami Simulator's hinges.svg from STALLED after 10,516
-        iterations to converged after 2,766, opacityExamples.svg 140 -> 73 iterations,
-        cuts.svg 194 -> 201, BoxPleatInOutWave.fold 139 -> 151, simplePatterns.svg 58 -> 59,
-        the other files, the benchmark scenes, the stiffness sweep and the batch benchmark's
-        sets unchanged. After 3 rejections instead: hinges.svg 3,324, BoxPleatInOutWave 148,
-        cuts 187, but Miura-ori 10 x 10 at a stiffness ratio of 1e8 88 -> 98; after 2: Miura-ori
-        100 x 100 15 -> 17. ``10**9`` turns it off (it is compared with an int32 count, so
+        along a flat valley otherwise crawls there on convex steps. ``10**9`` turns it off (it is
+        compared with an int32 count, so
         keep it below 2**31).
       buckling_ratio: an exact attempt is skipped (the iteration takes the convex part and
         counts no rejection) while, at some vertex, the negative transverse stiffness of the
@@ -928,28 +905,12 @@ class Newton:
         hinges give it out of their planes, ``sum stiffness l0 |grad(rho)|^2``: such bars
         buckle the sheet there and the exact Hessian is mostly indefinite (on a waterbomb
         2 x 2 every dense attempt in that state failed to factor and cost its iteration).
-        ``inf``: never skipped. Only far from equilibrium (``buckling_far``). Measured on
-        2026-12-06 (float64, tol 1e-10, dense up to ``dense_max`` vertices), ``inf`` -> 1: 64
-        of the batch benchmark's waterbomb 2 x 2 variants 13.67 -> 11.98 mean iterations, 64
-        Miura-ori 4 x 4 variants 7.19 either way; the benchmark scenes, stiffness sweep and
-        shared files (38 of them, hinges.svg apart) 1,384 -> 1,381 iterations in all: fewer
-        for Origami Simulator's flappingBird.svg 60 -> 48, curvedcrease2.svg 52 -> 49,
-        russianTriangle.svg 26 -> 23, waterbomb.svg 53 -> 50, birdBase.svg 19 -> 17,
-        squareBase.svg 15 -> 13, waterbombBase.svg 12 -> 11, box.fold 52 -> 51, the seed's
-        scene 11 -> 10, Miura-ori 10 x 10 12 -> 11, the Kresling 24 -> 23, the Yoshimura
-        33 -> 32, the stiffness sweep's 1e4, 1e6 and 1e8 15 -> 14, 37 -> 34 and 88 -> 87; more
-        for opacityExamples.svg 73 -> 101 and simplePatterns.svg 59 -> 64; the others (Miura-ori
-        100 x 100's 15 and hinges.svg's 4,778 among them) equal. 0.7 and 2 gave the waterbomb
-        variants 11.80 and 12.34; 1 is kept as the point where the compressed bars outweigh
-        the support, not tuned to one set.
+        ``inf``: never skipped. Only far from equilibrium (``buckling_far``). 1 is the point where
+        the compressed bars outweigh the support.
       buckling_far: ``buckling_ratio`` applies while the gradient (its largest gauged entry)
         is above this fraction of its start value. Near equilibrium a folded sheet's other
-        bars hold such a vertex and the exact Hessian factors: applied there too, box.fold
-        took 103 iterations instead of 52, flappingBird.svg 139, waterbomb.svg 99, and
-        hinges.svg no longer converged (13,527). 0.05 and 0.2 gave the waterbomb variants
-        12.0 and 12.2 (64 members), box.fold 43 and 77, flappingBird.svg 47 and 59,
-        simplePatterns.svg 56 and 54 (51, 48 and 64 at 0.1): single files move either way with
-        it, so 0.1, best for the waterbomb variants, is kept.
+        bars hold such a vertex and the exact Hessian factors (0.1:
+        docs/design-notes/measurements.md).
       shift_min: the first such shift, relative to the diagonal.
       max_linesearch_steps: halvings of the step before an iteration gives up.
       max_stalls: iterations in a row without a step before giving up (STALLED).
