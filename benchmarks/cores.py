@@ -18,7 +18,7 @@ def usable_cores() -> int:
 # on about one core and now and then waits (between kernels, for the host): with one device per
 # core 1.66-1.74 of this machine's 2 cores were busy, with two 1.77-1.86, and fold_batch folded
 # more in each of 21 rounds alternating in one process (the waterbomb set's medians +12 to
-# +16 %; 2026-12-06, docs/guide.md, "Several devices").
+# +16 %; 2026-12-06, docs/design-notes/batch.md).
 DEVICES_PER_CORE = 2
 
 

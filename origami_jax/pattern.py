@@ -1,6 +1,6 @@
 """The crease pattern: flat vertices, edges with FOLD assignments and target fold angles, faces.
 
-Conventions (the FOLD 1.2 conventions, see docs/guide.md):
+Conventions (the FOLD 1.2 conventions, see docs/concepts.md):
 
 * coordinates are in any length unit; the model is scale invariant;
 * fold angles are in **radians**, valley positive, mountain negative, flat 0, fully folded +-pi;

@@ -23,8 +23,8 @@ and the command line (``origami-jax``) and the benchmarks call it:
   cores that XLA computes on next. Opted in, each PARDISO call first sets
   ``kmp_set_blocktime(0)`` for the calling thread's teams (unless ``KMP_BLOCKTIME`` is set), on
   Intel's OpenMP runtime, which other libraries in the process may share. A large sheet's
-  Newton fold with PARDISO takes about a tenth less time with it (see docs/guide.md). Or set
-  ``KMP_BLOCKTIME=0`` before Python starts.
+  Newton fold with PARDISO takes about a tenth less time with it (see
+  docs/design-notes/newton.md). Or set ``KMP_BLOCKTIME=0`` before Python starts.
 
 The command line also turns on JAX's float64 (``jax_enable_x64``) and, with ``--cache``, its
 persistent compilation cache, and prints warnings on one line: in its console entry point
