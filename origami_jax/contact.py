@@ -1,5 +1,5 @@
-"""Self-contact: exact distances, the contact barrier, a broad phase and a step bound (issue 42,
-step 1: building blocks only; the solvers and ``fold`` do not use them yet).
+"""Self-contact: exact distances, the contact barrier, a broad phase and a step bound, which
+``fold(..., contact=True)`` uses with Newton's method (see docs/contact.md).
 
 A sheet's layers are kept apart by the barrier of incremental potential contact (Li et al.
 2020, "Incremental Potential Contact"; ipc-toolkit), on every pair of primitives that share no
@@ -76,7 +76,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -84,8 +84,10 @@ import numpy as np
 from jax import Array
 
 from origami_jax.barrier import ipc
-from origami_jax.energy import FoldParams
 from origami_jax.pattern import Mesh
+
+if TYPE_CHECKING:  # energy builds on this module
+    from origami_jax.energy import FoldParams
 
 __all__ = [
     "DHAT",
@@ -108,6 +110,7 @@ __all__ = [
     "ContactPairs",
     "pair_energies",
     "contact_energy",
+    "pair_hessians",
     "ContactReport",
     "contact_report",
     "build_pairs",
@@ -489,6 +492,50 @@ def contact_energy(
     :func:`pair_energies`. Its gradient and Hessian are JAX's."""
     e_pt, e_ee = pair_energies(x, pairs, dhat, kappa, rest)
     return jnp.sum(e_pt) + jnp.sum(e_ee)
+
+
+def _pair_hessian(q: Array, on: Array, kind: int, dhat: Array, kappa: Array, exact: Array) -> Array:
+    """(4, 4, 3, 3) one pair's barrier Hessian in its 4 corners ``q`` (4, 3), positive
+    semi-definite: exact, its negative eigenvalues clipped to 0 (``exact``), or the
+    Gauss-Newton part ``e'' g g^T`` in the squared distance ``d2`` (its gradient ``g``)."""
+    rows = _pt_rows if kind == 1 else _ee_rows
+    flat = q.reshape(12)
+
+    def d2_of(f):
+        return rows(f.reshape(1, 4, 3))[0]
+
+    d2, g = jax.value_and_grad(d2_of)(flat)
+    scale = 1.0 / (dhat * dhat)
+    _, b1, b2 = ipc(jnp.where(on, d2, 1.0 / scale) * scale)
+    gauss_newton = (kappa * b2 * scale * scale) * jnp.outer(g, g)
+
+    def projected(_):
+        full = gauss_newton + (kappa * b1 * scale) * jax.hessian(d2_of)(flat)
+        w, v = jnp.linalg.eigh(full)
+        return (v * jnp.maximum(w, 0.0)) @ v.T
+
+    h = jax.lax.cond(exact & on & (b2 > 0), projected, lambda _: gauss_newton, None)
+    h = jnp.where(on & jnp.all(jnp.isfinite(h)), h, 0.0)  # a degenerate pair: no curvature
+    return h.reshape(4, 3, 4, 3).transpose(0, 2, 1, 3)
+
+
+def pair_hessians(
+    x: Array, pairs: ContactPairs, dhat: Array, kappa: Array, exact: Array | bool
+) -> tuple[Array, Array]:
+    """``(corners, blocks)``: (P + Q, 4) the vertices of every candidate pair and (P + Q, 4, 4,
+    3, 3) their barrier Hessians' 3 x 3 blocks, each pair's positive semi-definite (see
+    :func:`_pair_hessian`; zero for pairs out of reach and padding rows): what Newton adds to
+    its assembled Hessian."""
+    pt_on = pairs.pt_mask & _apart(pairs.pt, 1)
+    ee_on = pairs.ee_mask & _apart(pairs.ee, 2)
+    exact = jnp.asarray(exact)
+    hp = jax.vmap(_pair_hessian, in_axes=(0, 0, None, None, None, None))(
+        x[pairs.pt], pt_on, 1, dhat, kappa, exact
+    )
+    he = jax.vmap(_pair_hessian, in_axes=(0, 0, None, None, None, None))(
+        x[pairs.ee], ee_on, 2, dhat, kappa, exact
+    )
+    return jnp.concatenate([pairs.pt, pairs.ee]), jnp.concatenate([hp, he])
 
 
 class ContactReport(NamedTuple):

@@ -55,6 +55,13 @@ from origami_jax.barrier import (
     signed_areas,
     triangle_normals,
 )
+from origami_jax.contact import (
+    Capacity,
+    ContactMesh,
+    ContactPairs,
+    build_pairs,
+    contact_energy,
+)
 from origami_jax.geometry import (
     bar_lengths,
     dihedral_angles,
@@ -69,6 +76,7 @@ __all__ = [
     "FoldParams",
     "Reference",
     "Barriers",
+    "ContactParams",
     "needs_barriers",
     "hinge_terms",
     "triangle_terms",
@@ -124,8 +132,17 @@ NO_BARRIERS = Barriers(0.0, 0.0)
 
 @functools.partial(
     jax.tree_util.register_dataclass,
-    data_fields=["bars", "hinges", "hinge_bars", "free", "free_bars", "triangles", "triangle_bars"],
-    meta_fields=["num_creases", "barriers", "num_free"],
+    data_fields=[
+        "bars",
+        "hinges",
+        "hinge_bars",
+        "free",
+        "free_bars",
+        "triangles",
+        "triangle_bars",
+        "contact",
+    ],
+    meta_fields=["num_creases", "barriers", "num_free", "contact_capacity"],
 )
 @dataclass(frozen=True)
 class Structure:
@@ -137,7 +154,9 @@ class Structure:
     each hinge; ``free`` (Hu, 4) hinges without a spring or barrier and their ``free_bars``,
     kept only to report their fold angles; ``triangles`` (T, 3) and their sides' bars
     ``triangle_bars`` (T, 3), only with an area barrier (else (0, 3)); ``barriers`` the
-    :class:`Barriers` built.
+    :class:`Barriers` built; ``contact`` the :class:`~origami_jax.contact.ContactMesh` of a
+    scene with self-contact (``None``: none) and ``contact_capacity`` the fixed sizes of its
+    candidate pairs (see :func:`with_contact`).
     """
 
     bars: Array
@@ -150,6 +169,8 @@ class Structure:
     num_creases: int
     barriers: Barriers = NO_BARRIERS
     num_free: int = 0
+    contact: ContactMesh | None = None
+    contact_capacity: Capacity | None = None
 
     @property
     def num_facets(self) -> int:
@@ -165,10 +186,29 @@ class Reference(NamedTuple):
         it (see :func:`origami_jax.geometry.fold_angles`), radians.
       normals: (T, 3) each barrier triangle's unit normal at the last accepted iterate: a
         triangle turned over against it has a negative area ((0, 3) without area barrier).
+      pairs: with self-contact, the candidate pairs built at the last accepted iterate
+        (:class:`~origami_jax.contact.ContactPairs`; ``None`` without contact).
     """
 
     angles: Array
     normals: Array
+    pairs: ContactPairs | None = None
+
+
+class ContactParams(NamedTuple):
+    """The self-contact barrier's parameters (differentiable).
+
+    Attributes:
+      dhat: () the barrier's reach, the gap folded layers keep (the paper's thickness),
+        pattern units.
+      kappa: () its weight, an energy (:func:`~origami_jax.contact.contact_stiffness`).
+      skin: () how much farther than ``dhat`` candidate pairs are gathered (pattern units): a
+        step moves no vertex more than half of it, so no pair comes within ``dhat`` unseen.
+    """
+
+    dhat: Array
+    kappa: Array
+    skin: Array
 
 
 class FoldParams(NamedTuple):
@@ -183,6 +223,7 @@ class FoldParams(NamedTuple):
       gap_scale: () a multiple of the structure's hinge gap (``None``: 1). Continuation in fold
         percent widens the gap on its way (a narrow one makes every step that turns a crease
         held at its wall tiny) and narrows it back at full percent.
+      contact: the self-contact barrier's :class:`ContactParams` (``None``: no contact).
     """
 
     target: Array
@@ -190,6 +231,7 @@ class FoldParams(NamedTuple):
     rest_length: Array
     stiffness: Stiffness
     gap_scale: Array | None = None
+    contact: ContactParams | None = None
 
 
 # a driven crease whose target reaches this far (radians) is folded nearly flat: such scenes get
@@ -423,7 +465,14 @@ def triangle_terms(
 def springs_only(structure: Structure) -> Structure:
     """The structure without its barriers: the bars' and hinges' springs alone."""
     none = structure.triangles[:0]
-    return dataclasses.replace(structure, barriers=NO_BARRIERS, triangles=none, triangle_bars=none)
+    return dataclasses.replace(
+        structure,
+        barriers=NO_BARRIERS,
+        triangles=none,
+        triangle_bars=none,
+        contact=None,
+        contact_capacity=None,
+    )
 
 
 def energy(
@@ -447,7 +496,26 @@ def energy(
         total = total + jnp.sum(hinge_terms(rho, structure, params)[0], axis=0)
     if structure.triangles.shape[0]:
         total = total + jnp.sum(triangle_terms(x, structure, params, reference.normals)[1], axis=0)
+    if structure.contact is not None:
+        total = total + contact_term(x, structure, params, reference)
     return total
+
+
+def contact_term(
+    x: Array, structure: Structure, params: FoldParams, reference: Reference | Array | None
+) -> Array:
+    """() the self-contact barrier's energy at ``x`` over the reference's candidate pairs (built
+    at ``x`` within ``dhat`` where the reference has none)."""
+    c = params.contact
+    pairs = reference.pairs if isinstance(reference, Reference) else None
+    if pairs is None:
+        pairs = contact_pairs(jax.lax.stop_gradient(x), structure, c.dhat)
+    return contact_energy(x, pairs, c.dhat, c.kappa)
+
+
+def contact_pairs(x: Array, structure: Structure, radius: Array) -> ContactPairs:
+    """The candidate pairs of ``x`` within ``radius``, at the structure's capacity."""
+    return build_pairs(x, structure.contact, radius, structure.contact_capacity)
 
 
 def barrier_distances(
@@ -522,9 +590,14 @@ def initial_reference(x: Array, structure: Structure, params: FoldParams) -> Ref
     each goal (the branch cut lies opposite, far from both flat and the target: a start folded
     through itself is seen as such, and brought back by the hinge barrier or the spring), and
     the triangles' normals at ``x``."""
+    pairs = None
+    if structure.contact is not None:
+        c = params.contact
+        pairs = contact_pairs(x, structure, c.dhat + c.skin)
     return Reference(
         fold_angles(x, structure.hinges, _toward(structure, params)),
         triangle_normals(x, structure.triangles),
+        pairs,
     )
 
 
@@ -539,9 +612,13 @@ def update_reference(x: Array, structure: Structure, reference: Reference) -> Re
     (a triangle turned over stays turned over, and its barrier keeps pushing it back)."""
     normals = triangle_normals(x, structure.triangles)
     side = jnp.sum(normals * reference.normals, axis=1, keepdims=True)
+    pairs = reference.pairs
+    if pairs is not None:  # gathered again around every accepted iterate
+        pairs = contact_pairs(x, structure, pairs.radius)
     return Reference(
         fold_angles(x, structure.hinges, reference.angles),
         jnp.where(side < 0, -normals, normals),
+        pairs,
     )
 
 

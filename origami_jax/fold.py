@@ -19,11 +19,22 @@ import numpy as np
 
 from origami_jax.barrier import HINGE_GAP
 from origami_jax.caches import LruCache
+from origami_jax.contact import (
+    Capacity,
+    allocate,
+    contact_mesh,
+    contact_report,
+    contact_stiffness,
+    default_dhat,
+    reallocate,
+)
 from origami_jax.energy import (
     NO_BARRIERS,
     Barriers,
+    ContactParams,
     FoldParams,
     Stiffness,
+    Structure,
     initial_reference,
     make_params,
     make_structure,
@@ -40,8 +51,14 @@ from origami_jax.metrics import (
 )
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
-from origami_jax.solvers import Solver, Status, get_solver
-from origami_jax.solvers.base import check_start, make_problem, positions, prepare
+from origami_jax.solvers import Newton, Solver, Status, get_solver
+from origami_jax.solvers.base import (
+    check_start,
+    default_max_step,
+    make_problem,
+    positions,
+    prepare,
+)
 
 __all__ = ["FoldResult", "fold", "default_tol"]
 
@@ -84,7 +101,10 @@ class FoldResult:
     percent and stiffness (a step retried smaller included), then the result's;
     ``path``: ``"direct"`` or ``"continuation"``; ``barriers``: the :class:`Barriers` built;
     ``frames``: with continuation, the states of the path from flat (:class:`Frame`, one per
-    fold percent, the last the result).
+    fold percent, the last the result); with self-contact, ``contact_dhat`` its reach (the
+    gap layers keep), ``contact_pairs`` the pairs of primitives closer than that at the
+    result and ``contact_min_ratio`` the least distance of any pair over it (``None``, 0 and
+    ``inf`` without contact).
     Units: radians, seconds, the pattern's length unit.
     """
 
@@ -112,6 +132,9 @@ class FoldResult:
     path: str = "direct"
     barriers: Barriers = NO_BARRIERS
     frames: list = field(default_factory=list)
+    contact_dhat: float | None = None
+    contact_pairs: int = 0
+    contact_min_ratio: float = float("inf")
 
     @functools.cached_property
     def through_pi(self) -> np.ndarray:
@@ -171,8 +194,12 @@ class FoldResult:
             )
         if len(self.intersections):
             out.append(
-                f"{len(self.intersections)} pairs of faces pass through each other: contact "
-                "between faces that share no vertex is not modelled yet"
+                f"{len(self.intersections)} pairs of faces pass through each other: "
+                + (
+                    "fold with contact=True (self-contact keeps layers apart)"
+                    if self.contact_dhat is None
+                    else "they crossed where contact could not stop them (a smaller dhat)"
+                )
             )
         if self.converged and self.fold_angle_error_max > 0.1:
             out.append(
@@ -205,6 +232,14 @@ class FoldResult:
         ]
         if self.shape_error is not None:
             rows.append(("shape error", f"{self.shape_error:.3e}"))
+        if self.contact_dhat is not None:
+            rows.append(
+                (
+                    "contact",
+                    f"{self.contact_pairs} pairs within dhat {self.contact_dhat:.3g}, the "
+                    f"closest at {self.contact_min_ratio:.3g} dhat",
+                )
+            )
         flagged = (
             ("folded through pi", "edges", self.through_pi),
             ("collapsed", "triangles", self.collapsed),
@@ -412,6 +447,7 @@ def fold(
     record_every: int | None = None,
     barriers: Barriers | bool | None = None,
     path: str = "auto",
+    contact: bool | float = False,
 ) -> FoldResult:
     """Fold ``pattern`` to equilibrium from flat (or from ``start``).
 
@@ -449,6 +485,10 @@ def fold(
         collapsed triangle,
         is then followed from flat (with the barriers, unless ``barriers=False``), and its
         time and iterations count in the result's.
+      contact: self-contact (:mod:`origami_jax.contact`): faces that share no vertex are kept
+        apart by a barrier, and no step passes one through another. ``True``: the default
+        reach ``dhat`` (the gap folded layers keep: :func:`with_contact`); a number: that
+        ``dhat``, pattern units; ``False`` (default): none. Newton only.
 
     Returns:
       A :class:`FoldResult`; it never holds NaN positions: a solve that meets a non-finite value
@@ -484,7 +524,14 @@ def fold(
         percent = float(params.percent)
     if path not in ("auto", "direct", "continuation"):
         raise ValueError(f"path must be 'auto', 'direct' or 'continuation', got {path!r}")
-    structure = make_structure(mesh, barriers)
+    if contact is not False and not isinstance(solver_obj, Newton):
+        raise ValueError(
+            f"contact: only solver='newton' bounds its steps among contact pairs so far, "
+            f"not {solver_obj.name!r}"
+        )
+    if contact is not False and contact is not True:
+        if not (np.isfinite(float(contact)) and float(contact) > 0):
+            raise ValueError(f"contact: dhat must be finite and > 0, got {contact}")
     # a direct solve chosen by "auto" that ends with a warning sign is followed again from flat
     retry = False
     if path == "auto":
@@ -501,6 +548,93 @@ def fold(
             bars.append(ProgressBar(max_iter))
         for bar in bars:
             bar.update(iterations, f"err {float(sample['fold_angle_error_max']):.2e} rad")
+
+    room: list[Capacity] = []  # the contact pairs' capacity, once a solve has outgrown one
+
+    def scene(which):
+        structure = make_structure(mesh, which)
+        if contact is False:
+            return structure, params
+        dhat = None if contact is True else float(contact)
+        return with_contact(mesh, structure, params, dhat, start, room[-1] if room else None)
+
+    while True:  # again, with more room, while the contact pairs outgrow their capacity
+        try:
+            solved, structure, run_params, path = _fold_once(
+                solver_obj,
+                mesh,
+                scene,
+                barriers,
+                start,
+                tol,
+                max_iter,
+                max_time,
+                record_every,
+                on_chunk,
+                path,
+                retry,
+                dtype,
+            )
+            break
+        except _ContactOverflow as overflow:
+            room.append(overflow.capacity)
+
+    state, m, x, angles, samples, out_of_time, iterations, compile_time, wall_time, frames = solved
+    for bar in bars:
+        bar.close()
+
+    status = Status(int(state.status))
+    if status == Status.RUNNING:
+        status = Status.TIME_LIMIT if out_of_time else Status.MAX_ITER
+    m = {k: float(v) for k, v in jax.device_get(m).items()}
+    x = np.asarray(x, np.float64)
+    shape_err = None
+    if reference_positions is not None:
+        shape_err = shape_error(x, reference_positions, pattern.diameter)
+    history = history_of(samples)
+    touching = {}
+    if structure.contact is not None:
+        touching = contact_summary(x, structure, run_params)
+    return FoldResult(
+        pattern=pattern,
+        positions=x,
+        fold_angles=np.asarray(angles, np.float64),
+        converged=status == Status.CONVERGED,
+        status=status,
+        reason=_reason(status, m, tol, iterations, x, pattern.mesh),
+        iterations=iterations,
+        solver=solver_obj.name,
+        percent=float(percent),
+        dtype=dtype.name,
+        wall_time=wall_time,
+        compile_time=compile_time,
+        shape_error=shape_err,
+        history=history,
+        path=path,
+        barriers=structure.barriers,
+        frames=frames,
+        **touching,
+        **{k: m[k] for k in METRIC_NAMES},
+    )
+
+
+def _fold_once(
+    solver_obj,
+    mesh,
+    scene,
+    barriers,
+    start,
+    tol,
+    max_iter,
+    max_time,
+    record_every,
+    on_chunk,
+    path,
+    retry,
+    dtype,
+):
+    """One try of :func:`fold`'s solve: ``(solved, structure, params, path)``."""
+    structure, params = scene(barriers)
 
     if path == "continuation":
         solved = _solve_path(
@@ -523,6 +657,7 @@ def fold(
             solver_obj, start_c, advance_c, problem, max_iter, max_time, record_every, on_chunk
         )
         x, angles = jax.device_get((x, angles))
+        _check_room(state, x, structure)
         solved = _Solved(
             state,
             m,
@@ -538,7 +673,7 @@ def fold(
         warning = _warning_sign(solved, mesh, dtype)
         if retry and warning is not None and solved.iterations < max_iter:
             if warning != "stalled" and barriers is None:
-                structure = make_structure(mesh, True)  # what went wrong is what they prevent
+                structure, params = scene(True)  # what went wrong is what they prevent
             spent = solved.wall_time
             again = _solve_path(
                 solver_obj,
@@ -569,39 +704,89 @@ def fold(
                 compile_time=solved.compile_time + again.compile_time,
                 wall_time=spent + again.wall_time,
             )
-    state, m, x, angles, samples, out_of_time, iterations, compile_time, wall_time, frames = solved
-    for bar in bars:
-        bar.close()
+    return solved, structure, params, path
 
-    status = Status(int(state.status))
-    if status == Status.RUNNING:
-        status = Status.TIME_LIMIT if out_of_time else Status.MAX_ITER
-    m = {k: float(v) for k, v in jax.device_get(m).items()}
-    x = np.asarray(x, np.float64)
-    shape_err = None
-    if reference_positions is not None:
-        shape_err = shape_error(x, reference_positions, pattern.diameter)
-    history = history_of(samples)
-    return FoldResult(
-        pattern=pattern,
-        positions=x,
-        fold_angles=np.asarray(angles, np.float64),
-        converged=status == Status.CONVERGED,
-        status=status,
-        reason=_reason(status, m, tol, iterations, x, pattern.mesh),
-        iterations=iterations,
-        solver=solver_obj.name,
-        percent=float(percent),
-        dtype=dtype.name,
-        wall_time=wall_time,
-        compile_time=compile_time,
-        shape_error=shape_err,
-        history=history,
-        path=path,
-        barriers=structure.barriers,
-        frames=frames,
-        **{k: m[k] for k in METRIC_NAMES},
+
+#: candidate contact pairs are gathered this far beyond ``dhat``, in median triangle altitudes:
+#: a step moves no vertex more than half of it (so the pairs are gathered again at every
+#: accepted iterate)
+CONTACT_SKIN = 2.0
+#: the first capacity for contact pairs holds this many times the start's
+CONTACT_ROOM = 2.0
+
+
+class _ContactOverflow(Exception):
+    """A solve's contact pairs outgrew their capacity: ``capacity`` holds the state it reached."""
+
+    def __init__(self, capacity: Capacity):
+        super().__init__(f"contact pairs outgrew their capacity: now {capacity}")
+        self.capacity = capacity
+
+
+def with_contact(
+    mesh,
+    structure: Structure,
+    params: FoldParams,
+    dhat: float | None = None,
+    start: np.ndarray | None = None,
+    capacity: Capacity | None = None,
+) -> tuple[Structure, FoldParams]:
+    """A scene with self-contact (host side): the structure with its
+    :class:`~origami_jax.contact.ContactMesh` and pair capacity, the parameters with
+    :class:`~origami_jax.energy.ContactParams`.
+
+    ``dhat`` (default :func:`~origami_jax.contact.default_dhat`, 1e-3 of the flat sheet's
+    diameter, or half the least distance between two primitives of the flat sheet that share no
+    vertex, if less: a sheet at rest has no pair in reach); the skin :data:`CONTACT_SKIN`
+    median triangle altitudes; the barrier's weight
+    :func:`~origami_jax.contact.contact_stiffness`; capacities for :data:`CONTACT_ROOM` times
+    the pairs of the start (or grown from ``capacity``)."""
+    flat = np.asarray(mesh.vertices, np.float64)
+    cmesh = contact_mesh(mesh)
+    if dhat is None:
+        extent = flat.max(axis=0) - flat.min(axis=0)
+        dhat = default_dhat(float(np.linalg.norm(extent)))
+        at_rest = allocate(flat, cmesh, dhat)
+        clearance = float(contact_report(flat, at_rest, dhat).min_ratio) * dhat
+        if clearance < dhat:
+            if not clearance > 0:
+                raise PatternError(
+                    "contact: two primitives of the flat sheet that share no vertex touch; "
+                    "give contact=<dhat> explicitly or mend the pattern"
+                )
+            dhat = 0.5 * clearance
+    skin = CONTACT_SKIN * 2.0 * default_max_step(mesh)
+    x0 = flat if start is None else np.asarray(start, np.float64)
+    pairs = allocate(x0, cmesh, dhat + skin, capacity, multiplier=CONTACT_ROOM)
+    dtype = params.rest_length.dtype
+    contact = ContactParams(
+        *(jnp.asarray(v, dtype) for v in (dhat, contact_stiffness(params), skin))
     )
+    structure = replace(
+        structure, contact=jax.tree.map(jnp.asarray, cmesh), contact_capacity=pairs.capacity
+    )
+    return structure, params._replace(contact=contact)
+
+
+def contact_summary(x: np.ndarray, structure: Structure, params: FoldParams) -> dict:
+    """The result's contact figures at positions ``x``: ``contact_dhat``, ``contact_pairs``
+    (pairs closer than it) and ``contact_min_ratio`` (the least distance over it)."""
+    dhat = float(params.contact.dhat)
+    x = jnp.asarray(x, params.rest_length.dtype)
+    report = contact_report(x, allocate(x, structure.contact, dhat), dhat)
+    return {
+        "contact_dhat": dhat,
+        "contact_pairs": int(report.num_active),
+        "contact_min_ratio": float(report.min_ratio),
+    }
+
+
+def _check_room(state, x, structure: Structure) -> None:
+    """Raise :class:`_ContactOverflow` where a solve stopped for want of room for its pairs,
+    with capacities that hold those of ``x``, where it stopped."""
+    if int(state.status) == Status.CONTACT_OVERFLOW:
+        pairs = reallocate(jnp.asarray(x), state.reference.pairs, structure.contact, CONTACT_ROOM)
+        raise _ContactOverflow(pairs.capacity)
 
 
 class _Solved(NamedTuple):
@@ -764,6 +949,7 @@ def _solve_path(
             retol=retol,
         )
         xk, angles_k = jax.device_get((xk, angles_k))
+        _check_room(state, xk, structure)
         steps = int(state.iteration)
         for sample in chunk[1:]:  # each step's start is the last one's end
             samples.append(

@@ -65,6 +65,7 @@ class Status(IntEnum):
     NONFINITE = 3
     STALLED = 4
     TIME_LIMIT = 5  # set on the host, between compiled chunks
+    CONTACT_OVERFLOW = 6  # more contact pairs than their capacity: gathered again on the host
 
 
 @jax.tree_util.register_dataclass

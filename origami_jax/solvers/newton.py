@@ -67,6 +67,7 @@ from jax import Array
 
 from origami_jax.barrier import S_MIN, rest_areas
 from origami_jax.caches import LruCache
+from origami_jax.contact import pair_hessians, step_bound
 from origami_jax.energy import (
     Reference,
     Structure,
@@ -548,6 +549,10 @@ def assemble(x: Array, problem: Problem, reference: Reference, exact: Array | bo
     layout: HessianLayout = problem.aux
     structure = problem.structure
     blocks = element_blocks(x, structure, problem.params, reference, exact, upper=layout.sparse)
+    contact = None
+    if structure.contact is not None and reference.pairs is not None:
+        c = problem.params.contact
+        contact = pair_hessians(x, reference.pairs, c.dhat, c.kappa, exact)
     v = problem.start.shape[0]
     elements = hessian_elements(structure)
     if layout.sparse:
@@ -571,10 +576,22 @@ def assemble(x: Array, problem: Problem, reference: Reference, exact: Array | bo
         part = jnp.sum(part[:, :, :, None] * cols[:, None], axis=2)
         values = jnp.sum(matrix.reshape(-1)[layout.block_entries], axis=1)
         slots = layout.block_slots.at[touched].get(mode="fill", fill_value=values.shape[0])
-        return values.at[slots].set(part.reshape(-1, 9), mode="drop")
+        values = values.at[slots].set(part.reshape(-1, 9), mode="drop")
+        if contact is not None:
+            # the sparse pattern is the sheet's: each pair's curvature on its corners' diagonal
+            # blocks only (a principal part of a positive semi-definite block stays one)
+            corners, pair_blocks = contact
+            diag = pair_blocks[:, jnp.arange(4), jnp.arange(4)]
+            own = jnp.zeros((v, 3, 3), x.dtype).at[corners].add(diag)
+            own = jnp.einsum("vij,vjk,vlk->vil", proj, own, proj)
+            values = values.at[layout.diag_blocks].add(own, mode="drop")
+        return values
     matrix = jnp.zeros((v, v, 3, 3), x.dtype)
     for part, e in zip(blocks, elements, strict=True):
         matrix = matrix.at[e[:, :, None], e[:, None, :]].add(part, mode="promise_in_bounds")
+    if contact is not None:
+        corners, pair_blocks = contact
+        matrix = matrix.at[corners[:, :, None], corners[:, None, :]].add(pair_blocks)
     matrix = jnp.swapaxes(matrix, 1, 2)  # (V, 3, V, 3)
     return _project_pinned(matrix, problem.pinned, problem.projectors).reshape(-1)
 
@@ -956,6 +973,8 @@ class Newton:
         status = jnp.where(
             ok, jnp.where(gmax == 0, Status.CONVERGED, Status.RUNNING), Status.NONFINITE
         )
+        if reference.pairs is not None:
+            status = jnp.where(reference.pairs.did_overflow, Status.CONTACT_OVERFLOW, status)
         zero = jnp.zeros((), jnp.int32)
         return NewtonState(
             u=u,
@@ -1135,6 +1154,22 @@ class Newton:
                 problem=problem,
                 reference=s.reference,
             )
+        pairs = s.reference.pairs if problem.structure.contact is not None else None
+        if pairs is not None:
+            # no vertex moves farther than half the skin (so no pair comes within dhat unseen),
+            # and no pair closes below a fraction of its distance along the chord to the new
+            # point (so no face passes through a face): incremental potential contact's filter
+            reach = 0.5 * problem.params.contact.skin
+
+            def moved(d):
+                return jnp.max(jnp.sqrt(jnp.sum(d * d, axis=-1)), initial=0.0)
+
+            limit = jnp.minimum(limit, reach / jnp.maximum(moved(step), 1e-300))
+            limit = limit * step_bound(x, limit * step, pairs)
+
+            def clear(y):
+                return (moved(y - x) <= reach) & (step_bound(x, y - x, pairs) >= 1.0)
+
         slope = limit * jnp.vdot(s.grad, step)
         ok = ok & (slope < 0)
 
@@ -1147,6 +1182,8 @@ class Newton:
             value = _energy(y, problem.structure, problem.params, s.reference)
             if barriers:  # a point that takes a barrier into its stiff continuation is refused
                 value = jnp.where(feasible(y), value, jnp.inf)
+            if pairs is not None:
+                value = jnp.where(clear(y), value, jnp.inf)
             return value
 
         noise = energy_noise(x, problem, s.reference, s.energy)
@@ -1233,6 +1270,8 @@ class Newton:
             _update_reference(positions(problem, u), problem.structure, s.reference),
             s.reference,
         )
+        if reference.pairs is not None:  # the host gathers them again with more room
+            status = jnp.where(reference.pairs.did_overflow, Status.CONTACT_OVERFLOW, status)
         # exact attempts are shifted once ``shift_after`` of them in a row have failed: 10x more
         # with each further failure, 10x less with each exact step taken
         # (to 0 once below a thousandth of ``shift_min``)

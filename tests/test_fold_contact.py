@@ -1,0 +1,147 @@
+"""Self-contact in the solve (fold(contact=...)): a sheet folded onto itself stops at the
+barrier's reach and never crosses, the pair Hessians Newton assembles are the barrier's own made
+positive semi-definite, and the switches and reports."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from origami_jax import fold, patterns
+from origami_jax.contact import (
+    all_pairs,
+    contact_barrier,
+    contact_energy,
+    contact_mesh,
+    edge_edge_distance_sq,
+    pair_hessians,
+    point_triangle_distance_sq,
+    step_bound,
+)
+from origami_jax.intersections import intersecting_pairs
+from origami_jax.solvers import Newton
+
+jax.config.update("jax_enable_x64", True)
+
+
+@pytest.mark.parametrize("linear_solver", ["dense", "sparse"])
+def test_a_full_valley_stops_at_thickness(linear_solver):
+    cp = patterns.single_crease(fold_angle=np.pi)
+    solver = Newton(linear_solver=linear_solver)
+    bare = fold(cp, solver=solver)
+    thick = fold(cp, solver=solver, contact=True)
+    # without contact the two halves fold flat onto each other: the crease at pi
+    assert bare.converged and abs(bare.fold_angles).max() == pytest.approx(np.pi, abs=1e-8)
+    assert thick.converged, thick.reason
+    assert thick.contact_dhat == pytest.approx(1e-3 * np.sqrt(2.0))
+    # with it they stop within the barrier's reach, apart, short of pi, crossing nowhere
+    assert 0.0 < thick.contact_min_ratio <= 1.0
+    assert thick.contact_pairs >= 1
+    crease = np.abs(thick.fold_angles).max()
+    assert np.pi - 0.01 < crease < np.pi - 1e-4
+    assert len(thick.intersections) == 0 and len(thick.through_pi) == 0
+    # the halves' diagonals cross half way out, where the closest pair is: the free corners lie
+    # about twice its distance above the other half's plane, so the layers are within 2 dhat
+    x = thick.positions
+    normal = np.cross(x[2] - x[1], x[4] - x[1])
+    normal /= np.linalg.norm(normal)
+    gap = np.abs((x[[0, 5]] - x[1]) @ normal)
+    assert np.all(gap > thick.contact_dhat) and np.all(gap <= 2 * thick.contact_dhat)
+    assert "contact" in thick.summary()
+
+
+T = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+def test_two_triangles_pushed_together_stop_at_dhat_and_never_cross():
+    # a triangle above the unit triangle, pulled down through it by a spring on its height;
+    # descended with the step bound that every contact solve uses
+    upper = np.array([[0.2, 0.2, 0.5], [0.6, 0.1, 0.6], [0.1, 0.6, 0.7]])
+    x = jnp.asarray(np.concatenate([T, upper]))
+    mesh = contact_mesh(np.array([[0, 1, 2], [3, 4, 5]]))
+    pairs = all_pairs(mesh, x)
+    dhat, kappa, k = 0.05, 1.0, 10.0
+
+    def energy(y):
+        pull = 0.5 * k * jnp.sum((y[3:, 2] + 1.0) ** 2)  # rest: 1 below the lower triangle
+        return contact_energy(y, pairs, dhat, kappa) + pull
+
+    grad = jax.jit(jax.grad(energy))
+    value = jax.jit(energy)
+    bound = jax.jit(step_bound)
+    fixed = np.zeros((6, 3))
+    fixed[3:, 2] = 1.0  # only the upper triangle's heights move
+    for _ in range(300):
+        g = np.asarray(grad(x)) * fixed
+        dx = -0.01 * g
+        t = float(bound(x, jnp.asarray(dx), pairs))
+        while t > 1e-12 and float(value(x + t * dx)) > float(value(x)):
+            t *= 0.5
+        x = x + t * dx
+        assert len(intersecting_pairs(np.asarray(x), np.array([[0, 1, 2], [3, 4, 5]]), 0.0)) == 0
+    lowest = float(np.min(np.asarray(x)[3:, 2]))
+    assert 0.0 < lowest <= dhat  # stopped within the barrier's reach, above the other one
+    # at rest: the barrier's push balances the spring's pull (the gradient is nearly zero)
+    assert np.max(np.abs(np.asarray(grad(x)) * fixed)) < 1e-6 * k
+
+
+def test_pair_hessians_are_the_barriers_own_made_positive_semi_definite():
+    rng = np.random.default_rng(3)
+    upper = np.array([[0.3, 0.3, 0.02], [0.9, 0.2, 0.03], [0.2, 0.8, 0.04]])
+    x = jnp.asarray(np.concatenate([T, upper + 0.01 * rng.normal(size=(3, 3))]))
+    mesh = contact_mesh(np.array([[0, 1, 2], [3, 4, 5]]))
+    pairs = all_pairs(mesh, x)
+    dhat, kappa = 0.1, 2.0
+    corners, blocks = pair_hessians(x, pairs, dhat, kappa, True)
+    _, gauss = pair_hessians(x, pairs, dhat, kappa, False)
+    rows = np.asarray(corners)
+    full = np.asarray(blocks).transpose(0, 1, 3, 2, 4).reshape(-1, 12, 12)
+    gn = np.asarray(gauss).transpose(0, 1, 3, 2, 4).reshape(-1, 12, 12)
+    n_pt = pairs.pt.shape[0]
+    active = 0
+    for r, q in enumerate(rows):
+        distance = point_triangle_distance_sq if r < n_pt else edge_edge_distance_sq
+
+        def e(flat, distance=distance):
+            c = flat.reshape(4, 3)
+            return contact_barrier(distance(c[0], c[1], c[2], c[3]), dhat, kappa)
+
+        h = np.asarray(jax.hessian(e)(x[q].reshape(12)))
+        w, v = np.linalg.eigh(h)
+        expected = (v * np.maximum(w, 0.0)) @ v.T
+        np.testing.assert_allclose(full[r], expected, atol=1e-9 * (1 + np.abs(h).max()))
+        assert np.linalg.eigvalsh(gn[r]).min() >= -1e-9 * (1 + np.abs(gn[r]).max())
+        active += bool(np.abs(h).max() > 0)
+    assert active >= 3  # the test saw pairs inside the barrier's reach
+
+
+def test_contact_switches_and_bad_values():
+    cp = patterns.single_crease(fold_angle=np.pi)
+    with pytest.raises(ValueError, match="only solver='newton'"):
+        fold(cp, solver="lbfgs", contact=True)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="dhat must be finite and > 0"):
+            fold(cp, contact=bad)
+    bare = fold(patterns.single_crease(fold_angle=1.0))
+    assert bare.contact_dhat is None and bare.contact_pairs == 0
+
+
+def test_a_square_base_from_flat_ends_flat_folded_with_layers_apart(shared_patterns):
+    from origami_jax import io
+
+    cp = io.load(shared_patterns / "origami-simulator" / "Bases" / "squareBase.svg")
+    result = fold(cp, contact=True)
+    assert result.converged, result.reason
+    assert len(result.intersections) == 0 and len(result.through_pi) == 0
+    assert len(result.collapsed) == 0
+    dhat = result.contact_dhat
+    assert 0.0 < result.contact_min_ratio <= 1.0 and result.contact_pairs > 0
+    # flat-folded: its four layers lie in a slab at most 2 dhat per layer gap thick
+    x = result.positions - result.positions.mean(axis=0)
+    normal = np.linalg.svd(x, full_matrices=False)[2][2]
+    height = x @ normal
+    assert np.ptp(height) <= 3 * 2 * dhat
+    # the creases fold flat but for the layers' thickness
+    assert result.fold_angle_error_max < 0.01
