@@ -60,7 +60,6 @@ def _number(
             raise argparse.ArgumentTypeError(f"must be {what}, got {text}")
         return value
 
-    parse.__name__ = kind.__name__  # argparse names the type by it in its own messages
     return parse
 
 
