@@ -4,11 +4,14 @@ flat-foldable; see :mod:`origami_jax.info`) and ``origami-jax render INPUT|--exa
 fold.png|fold.html|fold.gif|fold.mp4`` (a picture, an interactive page or an animation of the
 fold; see :mod:`origami_jax.viz`, needs ``pip install "origami-jax[viz]"``).
 
-Runs in float64 unless ``--float32`` is given. With ``--cache`` it keeps compiled solvers in a
-persistent cache (``$XDG_CACHE_HOME/origami_jax/<machine>``, default ``~/.cache/origami_jax``,
-one folder per CPU kind) so a second run on a pattern of the same size does not compile again;
-it is off by default because XLA 0.10 logs a CPU-feature warning on every cached load. Bad input
-prints one line ``error: ...`` and exits with code 2.
+Arguments are checked when parsed (:func:`build_parser`, which imports neither JAX nor the
+package's modules, so ``--help`` and ``--version`` answer at once; each command imports what it
+needs). Runs in float64 unless ``--float32`` is given. With ``--cache`` it keeps compiled
+solvers in a persistent cache (``$XDG_CACHE_HOME/origami_jax/<machine>``, default
+``~/.cache/origami_jax``, one folder per CPU kind) so a second run on a pattern of the same
+size does not compile again; it is off by default because XLA 0.10 logs a CPU-feature warning
+on every cached load. Bad input prints one line ``error: ...`` and exits with code 2 (a bad
+argument: argparse's usage line and ``error: argument ...``, also code 2).
 
 The command (:func:`console_main`: the ``origami-jax`` script and ``python -m origami_jax``),
 unlike the library, sets up its process: float64 (``jax_enable_x64``), the persistent cache,
@@ -20,10 +23,12 @@ process as it finds it (float64, the default, then needs ``jax_enable_x64`` on).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 EXAMPLES = (
     "seed_waterbomb",
@@ -38,30 +43,80 @@ EXAMPLES = (
 SEED_FINAL_ENERGY = 0.009519  # the seed's simulator, stopped by hand (anchors.md)
 
 
+def _number(
+    kind: type, what: str, low: float, high: float = math.inf, *, strict: bool = False
+) -> Callable[[str], Any]:
+    """An argparse ``type``: ``kind(text)`` in ``[low, high]`` (``(low, high]`` if ``strict``),
+    else a clear error (argparse's usage line, ``error: argument --name: ...``, exit code 2)."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            noun = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {noun}, got {text!r}") from None
+        # written so that NaN fails: every comparison with it is false
+        if not ((value > low if strict else value >= low) and value <= high):
+            raise argparse.ArgumentTypeError(f"must be {what}, got {text}")
+        return value
+
+    return parse
+
+
 def _scene_arguments(p: argparse.ArgumentParser, out_help: str) -> None:
     """The arguments ``fold`` and ``render`` share: what to fold, where to write it, how."""
     p.add_argument(
         "input", nargs="?", help="a .fold or .svg file (default: --example seed_waterbomb)"
     )
-    p.add_argument("--example", choices=EXAMPLES, help="use a built-in pattern instead")
+    p.add_argument(
+        "--example",
+        choices=EXAMPLES,
+        metavar="NAME",  # the usage line stays short; the names are in the help
+        help=f"fold a built-in pattern instead: {', '.join(EXAMPLES)}",
+    )
     p.add_argument("--out", help=out_help)
     p.add_argument("--solver", default="newton", help="newton (default), lbfgs or dynamics")
-    p.add_argument("--percent", type=float, default=100.0, help="fold percent (default: 100)")
+    p.add_argument(
+        "--percent",
+        type=_number(float, "from 0 to 100", 0.0, 100.0),
+        default=100.0,
+        help="fold percent, 0 (flat) to 100 (every crease at its target angle; the default)",
+    )
+    p.add_argument(
+        "--tol",
+        type=_number(float, "a positive number", 0.0, strict=True),
+        default=None,
+        help="grad_norm_rel tolerance (default: 1e-10 in float64, 1e-4 in float32)",
+    )
+    p.add_argument(
+        "--max-iter",
+        type=_number(int, "0 or more", 0),
+        default=100_000,
+        help="iteration limit, per fold (default: 100000)",
+    )
+    p.add_argument(
+        "--max-time",
+        type=_number(float, "0 or more seconds", 0.0),
+        default=None,
+        help="time limit in seconds, per fold (default: none)",
+    )
+    p.add_argument("--float32", action="store_true", help="solve in float32 (default float64)")
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
+    """The ``origami-jax`` argument parser; building it imports neither JAX nor the package's
+    modules (``--help`` and ``--version`` answer at once)."""
+    from origami_jax import __version__
+
     parser = argparse.ArgumentParser(
         prog="origami-jax", description="Fold crease patterns with a differentiable JAX solver."
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     f = sub.add_parser("fold", help="fold a crease pattern and write the folded state")
     _scene_arguments(
         f, "output file: .fold, .svg, .obj, .ply, .stl or .vtu (default: <name>-folded.fold)"
     )
-    f.add_argument("--tol", type=float, default=None, help="grad_norm_rel tolerance")
-    f.add_argument("--max-iter", type=int, default=100_000, help="iteration limit")
-    f.add_argument("--max-time", type=float, default=None, help="time limit in seconds")
-    f.add_argument("--float32", action="store_true", help="solve in float32 (default float64)")
     f.add_argument("--quiet", action="store_true", help="no progress bar")
     f.add_argument(
         "--path",
@@ -93,11 +148,39 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--color", choices=("strain", "fold_angle_error"), help="colour the faces by this error"
     )
-    r.add_argument("--frames", type=int, default=30, help="animation frames (default: 30)")
-    r.add_argument("--fps", type=int, default=15, help="animation frames per second (15)")
-    r.add_argument("--max-iter", type=int, default=100_000, help="iteration limit per fold")
-    r.add_argument("--dpi", type=int, default=120, help="PNG / animation resolution (120)")
+    r.add_argument(
+        "--frames",
+        type=_number(int, "2 or more", 2),
+        default=30,
+        help="animation frames (default: 30)",
+    )
+    r.add_argument(
+        "--fps",
+        type=_number(int, "1 or more", 1),
+        default=15,
+        help="animation frames per second (15)",
+    )
+    r.add_argument(
+        "--dpi",
+        type=_number(int, "1 or more", 1),
+        default=120,
+        help="PNG / animation resolution (120)",
+    )
     return parser
+
+
+def _solve_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword arguments of :func:`~origami_jax.fold` that ``fold`` and ``render`` share."""
+    import jax.numpy as jnp
+
+    return dict(
+        solver=args.solver,
+        percent=args.percent / 100.0,
+        tol=args.tol,
+        max_iter=args.max_iter,
+        max_time=args.max_time,
+        dtype=jnp.float32 if args.float32 else jnp.float64,
+    )
 
 
 def _info(path: str) -> int:
@@ -173,14 +256,13 @@ def _render(args, pattern, stiffness) -> int:
         viz._matplotlib()
     if suffix in (".gif", ".mp4"):
         viz._movie_rc(out)
-    percent = args.percent / 100.0
-    solve = dict(stiffness=stiffness, solver=args.solver, max_iter=args.max_iter)
+    solve = dict(_solve_options(args), stiffness=stiffness)
     if suffix in (".gif", ".mp4"):
-        frames = viz.fold_frames(pattern, args.frames, percent=percent, **solve)
+        frames = viz.fold_frames(pattern, args.frames, **solve)
         viz.animate_fold(pattern, out, frames, args.fps, color=args.color, dpi=args.dpi)
         result = frames[-1]
     else:
-        result = fold(pattern, percent=percent, **solve)
+        result = fold(pattern, **solve)
         if suffix == ".html":
             viz.save_html(result, out, color=args.color)
         else:
@@ -229,7 +311,7 @@ def _set_up_process(args: argparse.Namespace) -> None:
 def console_main(argv: Sequence[str] | None = None) -> int:
     """The ``origami-jax`` command (``[project.scripts]``, ``python -m origami_jax``): sets up
     the process (see the module docstring), then runs :func:`main`'s command."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     if args.command != "info":  # info solves nothing and reports its warnings itself
         _set_up_process(args)
     return _run(args)
@@ -238,14 +320,12 @@ def console_main(argv: Sequence[str] | None = None) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command (``fold``, ``info`` or ``render``, with its arguments ``argv``; default
     ``sys.argv[1:]``) in this process, changing none of its settings; returns the exit code."""
-    return _run(_parser().parse_args(argv))
+    return _run(build_parser().parse_args(argv))
 
 
 def _run(args: argparse.Namespace) -> int:
     if args.command == "info":
         return _info(args.input)
-    import jax.numpy as jnp
-
     from origami_jax import PatternError, io
     from origami_jax.fold import fold
 
@@ -262,12 +342,7 @@ def _run(args: argparse.Namespace) -> int:
         result = fold(
             pattern,
             stiffness=stiffness,
-            percent=args.percent / 100.0,
-            solver=args.solver,
-            tol=args.tol,
-            max_iter=args.max_iter,
-            max_time=args.max_time,
-            dtype=jnp.float32 if args.float32 else jnp.float64,
+            **_solve_options(args),
             progress=not args.quiet,
             path=args.path,
             barriers={"auto": None, "on": True, "off": False}[args.barriers],

@@ -403,7 +403,8 @@ def kabsch(x: Array, target: Array, weights: Array | None = None) -> Array:
     cx = jnp.sum(w[:, None] * x, axis=0)
     ct = jnp.sum(w[:, None] * target, axis=0)
     h = ((x - cx) * w[:, None]).T @ (target - ct)
-    u, _, vt = jnp.linalg.svd(h)
+    # 3 x 3: reduced is full; jax before 0.8.1 differentiates only the reduced SVD
+    u, _, vt = jnp.linalg.svd(h, full_matrices=False)
     d = jnp.sign(jnp.linalg.det(vt.T @ u.T))
     rot = vt.T @ jnp.diag(jnp.array([1.0, 1.0, 1.0], x.dtype).at[2].set(d)) @ u.T
     return (x - cx) @ rot.T + ct

@@ -50,6 +50,7 @@ __all__ = [
     "ASSIGNMENT_NAMES",
     "edge_assignments",
     "face_values",
+    "default_view",
     "plot_fold",
     "plot_pattern",
     "plotly_fold",
@@ -255,16 +256,88 @@ def _shade(x: np.ndarray, tri: np.ndarray, base: np.ndarray | None, elev: float,
     return out
 
 
-def _frame(ax, points: np.ndarray, margin: float = 0.02, zoom: float = 1.25) -> None:
-    """Equal-aspect limits that hold all ``points`` (N, 3), the box shaped like their extent."""
+# the default camera (matplotlib's) for a sheet that is not flat
+DEFAULT_VIEW = (30.0, -60.0)
+# a sheet whose RMS thickness off its best-fit plane is under this fraction of its smaller RMS
+# size in that plane counts as flat: the default camera may see it edge-on, as a line
+_FLAT = 0.02
+
+
+def default_view(points: np.ndarray) -> tuple[float, float]:
+    """The camera ``(elev, azim)`` (degrees) for a sheet at ``points`` (N, 3): along the normal
+    of its best-fit plane when it is (nearly) flat (a flat-folded base, the unfolded sheet),
+    from the side :data:`DEFAULT_VIEW` sees; else :data:`DEFAULT_VIEW`.
+
+    Example:
+      >>> import origami_jax as oj
+      >>> default_view(oj.patterns.miura_ori(2, 2).mesh.vertices)   # flat: seen from above
+      (90.0, -90.0)
+    """
+    x = np.asarray(points, np.float64)
+    if x.shape[1] == 2:  # a flat pattern's 2-D coordinates
+        return (90.0, -90.0)
+    _, sv, vt = np.linalg.svd(x - x.mean(axis=0), full_matrices=False)
+    if len(sv) < 3 or sv[2] > _FLAT * sv[1]:
+        return DEFAULT_VIEW
+    normal = vt[2] if vt[2] @ _view_vector(*DEFAULT_VIEW) >= 0 else -vt[2]
+    elev = float(np.degrees(np.arcsin(np.clip(normal[2], -1.0, 1.0))))
+    if abs(normal[2]) > np.cos(np.radians(1.0)):  # from above: x to the right, y up, as in 2-D
+        return (90.0 if normal[2] > 0 else -90.0, -90.0)
+    return (elev, float(np.degrees(np.arctan2(normal[1], normal[0]))))
+
+
+def _view(points: np.ndarray, elev: float | None, azim: float | None) -> tuple[float, float]:
+    """The camera: as given; :func:`default_view` when neither angle is given."""
+    if elev is None and azim is None:
+        return default_view(points)
+    return (DEFAULT_VIEW[0] if elev is None else elev, DEFAULT_VIEW[1] if azim is None else azim)
+
+
+def _axes_fractions(ax, points: np.ndarray) -> np.ndarray:
+    """(N, 2) where ``points`` (N, 3) fall in ``ax``'s box (0 to 1 inside), as drawn now."""
+    ax.apply_aspect()  # a 3-D axes draws in a square inside its position
+    m = np.asarray(ax.get_proj())
+    h = m @ np.column_stack([points, np.ones(len(points))]).T
+    xy = (h[:2] / h[3]).T  # the 2-D data coordinates mplot3d draws at
+    return ax.transAxes.inverted().transform(ax.transData.transform(xy))
+
+
+def _frame(ax, points: np.ndarray, margin: float = 0.04, box: bool = False) -> None:
+    """Equal-aspect limits that hold all ``points`` (N, 3), centred and zoomed so that their
+    picture from ``ax``'s camera fills its box up to ``margin`` on each side (nothing cut off
+    at the edges, nothing drawn over a colour bar beside it); ``box``: the limits' box and its
+    labels framed by matplotlib instead (for an axes drawn with its axes)."""
     lo, hi = points.min(axis=0), points.max(axis=0)
     span = float(np.max(hi - lo)) or 1.0
-    ranges = np.maximum(hi - lo, 0.04 * span) * (1 + 2 * margin)
-    centre = (lo + hi) / 2
-    ax.set_xlim(centre[0] - ranges[0] / 2, centre[0] + ranges[0] / 2)
-    ax.set_ylim(centre[1] - ranges[1] / 2, centre[1] + ranges[1] / 2)
-    ax.set_zlim(centre[2] - ranges[2] / 2, centre[2] + ranges[2] / 2)
-    ax.set_box_aspect(tuple(ranges), zoom=zoom)
+
+    def limits(centre: np.ndarray, zoom: float) -> None:
+        # the box holds every point (an axes drawn shows them inside it); a flat sheet's box
+        # keeps some depth
+        half = np.maximum(np.maximum(hi - centre, centre - lo), 0.02 * span)
+        ax.set_xlim(centre[0] - half[0], centre[0] + half[0])
+        ax.set_ylim(centre[1] - half[1], centre[1] + half[1])
+        ax.set_zlim(centre[2] - half[2], centre[2] + half[2])
+        ax.set_box_aspect(tuple(half), zoom=zoom)
+
+    # move the box's centre along the picture's plane (the projection's least-squares inverse)
+    # until the points' picture is centred in the axes, and zoom until it fills them
+    centre, zoom = (lo + hi) / 2, 1.0
+    limits(centre, zoom)
+    if box:
+        return
+    for _ in range(8):  # orthographic: two or three steps
+        f = _axes_fractions(ax, np.vstack([points, centre, centre + np.eye(3) * span]))
+        f, probe = f[: len(points)], f[len(points) :]
+        middle = (f.min(axis=0) + f.max(axis=0)) / 2
+        # the picture's size against the room there is
+        reach = float(np.max(f.max(axis=0) - f.min(axis=0))) / (1 - 2 * margin)
+        done = np.max(np.abs(middle - 0.5)) < 1e-3 and abs(reach - 1) < 1e-3
+        if done or reach == 0:  # (0: every point on one spot: nothing to zoom to)
+            break
+        jac = (probe[1:] - probe[0]).T / span  # (2, 3): axes fractions per unit length
+        centre = centre + np.linalg.pinv(jac) @ (middle - 0.5)
+        zoom /= reach
+        limits(centre, zoom)
 
 
 def _crease_segments(pattern: CreasePattern, x: np.ndarray, show_facets: bool):
@@ -409,6 +482,17 @@ def _setup_3d(ax, elev: float, azim: float, show_axes: bool, proj_type: str) -> 
         ax.set_axis_off()
 
 
+def _colour_bar(ax, norm, cmap, label: str) -> None:
+    """A colour bar in an axes of its own, taken from ``ax``'s right side (before the sheet is
+    framed in what is left); its ticks written out (``%.3g``), not with a ``1e-13`` multiplier
+    above the bar that would reach over the sheet's axes."""
+    from matplotlib.cm import ScalarMappable
+
+    ax.figure.colorbar(
+        ScalarMappable(norm, cmap), ax=ax, shrink=0.6, pad=0.02, label=label, format="%.3g"
+    )
+
+
 def _color_values(color, result_or_positions, pattern, percent):
     if color is None:
         return None, None
@@ -432,8 +516,8 @@ def plot_fold(
     show_facets: bool = False,
     *,
     percent: float | None = None,
-    elev: float = 30.0,
-    azim: float = -60.0,
+    elev: float | None = None,
+    azim: float | None = None,
     cmap: str = "viridis",
     vmax: float | None = None,
     title: str | None = None,
@@ -457,7 +541,9 @@ def plot_fold(
       show_facets: also draw facet creases and triangulation edges (thin yellow).
       percent: fold percent the fold-angle error is measured against (default: the result's,
         or 1 for positions).
-      elev, azim: camera angles in degrees (matplotlib's ``view_init``).
+      elev, azim: camera angles in degrees (matplotlib's ``view_init``); default
+        :func:`default_view`: matplotlib's (30, -60), or along the sheet's normal when it is
+        flat, so that a flat-folded result is not seen edge-on.
       vmax: upper end of the colour scale (default: the largest value).
       proj_type: ``"ortho"`` or ``"persp"``.
       hide_occluded: cut away the parts of creases that faces hide from this camera
@@ -466,7 +552,8 @@ def plot_fold(
 
     Returns:
       The matplotlib figure (its axes holds one ``Poly3DCollection`` with one polygon per mesh
-      triangle; equal aspect, limits framing the whole sheet).
+      triangle; equal aspect; the sheet's picture centred, filling the axes up to a margin; a
+      colour bar in an axes of its own beside it).
 
     Example:
       >>> import origami_jax as oj
@@ -488,20 +575,18 @@ def plot_fold(
     elif getattr(ax, "name", None) != "3d":
         raise ValueError("ax: plot_fold needs a 3-D axes (add_subplot(projection='3d'))")
     fig = ax.figure
+    elev, azim = _view(x, elev, azim)
     _setup_3d(ax, elev, azim, show_axes, proj_type)
     cm = colormaps[cmap]
     norm = None
     if values is not None:
         top = float(np.max(values)) if vmax is None else float(vmax)
         norm = Normalize(0.0, top if top > 0 else 1.0)
+        _colour_bar(ax, norm, cm, label)
     _draw_fold(
         ax, pattern, x, values, norm, cm, show_creases, show_facets, elev, azim, hide_occluded
     )
-    _frame(ax, x)
-    if values is not None:
-        from matplotlib.cm import ScalarMappable
-
-        fig.colorbar(ScalarMappable(norm, cm), ax=ax, shrink=0.6, pad=0.02, label=label)
+    _frame(ax, x, box=show_axes)
     if title is None:
         title = pattern.name
         if isinstance(result_or_positions, FoldResult):
@@ -867,8 +952,8 @@ def animate_fold(
     percent: float = 1.0,
     color: str | None = None,
     show_facets: bool = False,
-    elev: float = 30.0,
-    azim: float = -60.0,
+    elev: float | None = None,
+    azim: float | None = None,
     cmap: str = "viridis",
     dpi: int = 100,
     figsize: tuple[float, float] = (6.0, 5.0),
@@ -890,6 +975,7 @@ def animate_fold(
       fps: frames per second.
       color: ``None``, ``"strain"`` or ``"fold_angle_error"`` (against each frame's percent,
         one colour scale for all frames).
+      elev, azim: camera angles in degrees; default: :func:`default_view` of the last frame.
 
     The camera frames the union of all frames (fixed limits), so the sheet never leaves it.
 
@@ -901,7 +987,6 @@ def animate_fold(
     """
     _matplotlib()
     from matplotlib import colormaps
-    from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
 
@@ -934,10 +1019,9 @@ def animate_fold(
             ]
             top = max(float(np.max(v)) for v in values)
             norm = Normalize(0.0, top if top > 0 else 1.0)
-            fig.colorbar(
-                ScalarMappable(norm, cm), ax=ax, shrink=0.6, pad=0.02, label=COLOR_LABELS[color]
-            )
+            _colour_bar(ax, norm, cm, COLOR_LABELS[color])
         everything = np.concatenate(positions)
+        elev, azim = _view(positions[-1], elev, azim)
         with atomic_path(path) as tmp, writer.saving(fig, str(tmp), dpi):
             for k, x in enumerate(positions):
                 ax.clear()

@@ -1,8 +1,10 @@
 """The command line: the table, the written file, one-line errors with exit code 2."""
 
 import io
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -134,3 +136,77 @@ def test_import_changes_no_jax_flag():
     )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "False"
+
+
+def _shell(*args: str) -> subprocess.CompletedProcess:
+    """``python args`` in a fresh interpreter, the package found as this test's is."""
+    root = str(Path(__file__).resolve().parents[1])
+    env = dict(
+        os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))
+    )
+    return subprocess.run(
+        [sys.executable, *args], capture_output=True, text=True, timeout=120, env=env
+    )
+
+
+def test_help_and_version_import_no_jax():
+    """``--help`` and ``--version`` answer without importing JAX or the package's modules (the
+    contract that makes them instant; no wall-clock time is asserted)."""
+    import origami_jax
+
+    proc = _shell("-m", "origami_jax", "--help")
+    assert proc.returncode == 0, proc.stderr
+    assert "fold" in proc.stdout and "render" in proc.stdout and "--version" in proc.stdout
+    proc = _shell("-m", "origami_jax", "--version")
+    assert proc.returncode == 0 and proc.stdout.split() == ["origami-jax", origami_jax.__version__]
+    code = (
+        "import sys\n"
+        "from origami_jax.cli import build_parser, console_main\n"
+        "build_parser()\n"
+        "for argv in (['--help'], ['fold', '--help'], ['render', '--help'], ['--version']):\n"
+        "    try:\n"
+        "        console_main(argv)\n"
+        "    except SystemExit as exc:\n"
+        "        assert exc.code == 0, (argv, exc.code)\n"
+        "heavy = ('jax', 'jaxlib', 'numpy', 'scipy', 'matplotlib')\n"
+        "print('imported:', sorted(m for m in sys.modules if m.split('.')[0] in heavy\n"
+        "      or m.startswith('origami_jax.') and m != 'origami_jax.cli'))\n"
+    )
+    proc = _shell("-c", code)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.splitlines()[-1] == "imported: []"
+
+
+def test_version_attribute():
+    import origami_jax
+
+    assert isinstance(origami_jax.__version__, str) and origami_jax.__version__[0].isdigit()
+    assert "__version__" in dir(origami_jax) and "fold" in dir(origami_jax)
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["fold", "--percent", "250"], "argument --percent: must be from 0 to 100, got 250"),
+        (["fold", "--percent", "-5"], "argument --percent: must be from 0 to 100, got -5"),
+        (["render", "--percent", "nan"], "argument --percent: must be from 0 to 100, got nan"),
+        (["fold", "--percent", "half"], "argument --percent: expected a number, got 'half'"),
+        (["fold", "--tol", "0"], "argument --tol: must be a positive number, got 0"),
+        (["render", "--tol", "-0.5"], "argument --tol: must be a positive number, got -0.5"),
+        (["fold", "--max-time", "-1"], "argument --max-time: must be 0 or more seconds"),
+        (["fold", "--max-iter", "-1"], "argument --max-iter: must be 0 or more, got -1"),
+        (["render", "--max-iter", "1e3"], "argument --max-iter: expected an integer"),
+        (["render", "--frames", "1"], "argument --frames: must be 2 or more, got 1"),
+        (["render", "--fps", "0"], "argument --fps: must be 1 or more, got 0"),
+        (["render", "--dpi", "0"], "argument --dpi: must be 1 or more, got 0"),
+    ],
+)
+def test_out_of_range_arguments_are_refused(argv, message, capsys, tmp_path, monkeypatch):
+    """Checked when parsed, before anything is loaded or folded: argparse's usage line and
+    ``error: argument ...``, exit code 2."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        main([*argv, "--example", "single_crease"])
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())

@@ -41,6 +41,8 @@ IMPORT_SCRIPT = textwrap.dedent(
 
     ctypes.CDLL = Recorded
     import origami_jax
+    for name in origami_jax.__all__:  # the public names load lazily: every one of them
+        getattr(origami_jax, name)
     os.putenv, os.unsetenv, ctypes.CDLL = put, unset, cdll
 
     print("events:", events)

@@ -32,10 +32,28 @@ def result():
     return r
 
 
+@pytest.fixture(scope="module")
+def flat_folded():
+    """A sheet folded flat in half (its folded state is a plane)."""
+    r = fold(patterns.single_crease(fold_angle=np.pi))
+    assert r.converged, r.reason
+    return r
+
+
 @pytest.fixture(autouse=True)
 def _close_figures():
     yield
     plt.close("all")
+
+
+def _picture(ax):
+    """The display box of what ``ax`` draws of the sheet (faces and creases, as projected)."""
+    from matplotlib.transforms import Bbox
+
+    ax.figure.canvas.draw()  # 3-D collections have their 2-D paths once projected
+    paths = [p.vertices for c in ax.collections for p in c.get_paths()]
+    points = ax.transData.transform(np.concatenate(paths))
+    return Bbox([points.min(axis=0), points.max(axis=0)])
 
 
 def _lines(ax) -> dict[str, Line3DCollection]:
@@ -119,6 +137,66 @@ def test_plot_fold_facets_and_colour_bar(result):
     fig = viz.plot_fold(result.positions, result.pattern, color="fold_angle_error")
     assert "fold-angle" in fig.axes[1].get_ylabel()
     assert len(viz.plot_fold(result, show_creases=False).axes[0].collections) == 1
+
+
+@pytest.mark.parametrize("color", [None, "strain"])
+def test_plot_fold_frames_the_sheet_beside_its_colour_bar(result, color):
+    """The sheet's picture is centred in its axes and fills them up to a margin: nothing cut
+    off at the figure's edges, nothing under the colour bar, which has an axes of its own."""
+    fig = viz.plot_fold(result, color=color)
+    ax = fig.axes[0]
+    picture, box = _picture(ax), ax.bbox
+    assert box.x0 < picture.x0 and picture.x1 < box.x1
+    assert box.y0 < picture.y0 and picture.y1 < box.y1
+    assert fig.bbox.contains(*picture.p0) and fig.bbox.contains(*picture.p1)
+    fill = max(picture.width / box.width, picture.height / box.height)
+    assert 0.85 < fill < 0.95
+    assert np.allclose(
+        [picture.x0 - box.x0, picture.y0 - box.y0],
+        [box.x1 - picture.x1, box.y1 - picture.y1],
+        atol=2.0,
+    )
+    if color is not None:
+        bar = fig.axes[1].get_tightbbox(fig.canvas.get_renderer())  # ticks and label too
+        assert not picture.overlaps(bar) and not box.overlaps(fig.axes[1].bbox)
+        assert fig.bbox.x1 >= bar.x1  # its label inside the figure
+
+
+def _normal(points) -> np.ndarray:
+    """The unit normal of the best-fit plane of ``points`` (N, 3)."""
+    return np.linalg.svd(points - points.mean(axis=0))[2][2]
+
+
+def test_a_flat_folded_sheet_is_not_seen_edge_on(flat_folded):
+    """A sheet folded flat in half, turned so that matplotlib's default camera would see it
+    edge-on (a line): it is drawn seen along its normal, as wide as it is."""
+    x = np.asarray(flat_folded.positions)
+    x = x - x.mean(axis=0)
+    own = np.linalg.svd(x)[2]  # the sheet's axes, its normal last
+    assert np.ptp(x @ own[2]) < 1e-6  # flat
+    camera = viz._view_vector(*viz.DEFAULT_VIEW)
+    normal = np.cross(camera, [0.0, 0.0, 1.0])
+    normal /= np.linalg.norm(normal)
+    turn = np.stack([camera, np.cross(normal, camera), normal], axis=1)  # the normal to normal
+    edge_on = x @ own.T @ turn.T
+    assert abs(_normal(edge_on) @ camera) < 1e-6  # the plane holds the default camera's ray
+    for points, pattern in [(flat_folded, None), (edge_on, flat_folded.pattern)]:
+        fig = viz.plot_fold(points, pattern)
+        ax = fig.axes[0]
+        seen_from = viz._view_vector(ax.elev, ax.azim)
+        assert abs(seen_from @ _normal(np.asarray(getattr(points, "positions", points)))) > 0.999
+        picture = _picture(ax)  # edge-on, it would be a line
+        assert min(picture.width, picture.height) > 0.4 * max(picture.width, picture.height)
+    # a camera given is used as given
+    ax = viz.plot_fold(edge_on, flat_folded.pattern, elev=30.0, azim=-60.0).axes[0]
+    assert (ax.elev, ax.azim) == (30.0, -60.0)
+
+
+def test_default_view(result):
+    """From above for the unfolded sheet (x to the right, y up, as in the pattern's plot), the
+    default camera for a sheet that is not flat."""
+    assert viz.default_view(result.pattern.mesh.vertices) == (90.0, -90.0)
+    assert viz.default_view(result.positions) == viz.DEFAULT_VIEW
 
 
 def test_plot_fold_needs_pattern_for_positions(result):
@@ -282,6 +360,19 @@ def test_render_writes_file(suffix, result, tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([src.name, out.name])
     if suffix == ".png":
         assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_render_solve_options(result, tmp_path, capsys):
+    """``render`` takes ``fold``'s ``--float32``, ``--tol`` and ``--max-time``."""
+    src = tmp_path / "miura.fold"
+    io.save(src, result.pattern)
+    out = tmp_path / "fold.png"
+    argv = ["render", str(src), "--out", str(out), "--solver", SOLVER, "--dpi", "20"]
+    assert main([*argv, "--float32", "--tol", "1e-3"]) == 0, capsys.readouterr().err
+    table = capsys.readouterr().out
+    assert f"{SOLVER} (float32)" in table and "tol 1.0e-03" in table
+    assert main([*argv, "--max-time", "0"]) == 1
+    assert "time limit reached" in capsys.readouterr().out
 
 
 def test_render_bad_extension_is_an_error_and_writes_nothing(tmp_path, capsys):
