@@ -185,9 +185,9 @@ def markdown(rows: list[dict], machine: str) -> str:
             f"zero-energy state. Of their {len(others)} stiff or scaled folds, "
             f"{len(others) - len(missed)} end at the targets; of the other {len(missed)}, "
             f"{sum(lower(r) for r in missed)} converge to a state of lower energy than the "
-            f"targets' (the strained bars buckle the fold once they are stiff enough against "
-            f"the creases) and {sum(r['status'] != 'converged' for r in missed)} do not "
-            f"converge.",
+            f"targets' (once the bars are stiff enough against the creases, the strained fold "
+            f"buckles or is no longer the lowest state) and "
+            f"{sum(r['status'] != 'converged' for r in missed)} end unconverged.",
             "",
         ]
     lines += ["## Files with a zero-energy folded state", ""] + table(zero)
