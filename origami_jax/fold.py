@@ -712,7 +712,7 @@ def _fold_once(
 #: accepted iterate)
 CONTACT_SKIN = 2.0
 #: the first capacity for contact pairs holds this many times the start's
-CONTACT_ROOM = 2.0
+CONTACT_ROOM = 4.0
 
 
 class _ContactOverflow(Exception):
@@ -785,8 +785,12 @@ def _check_room(state, x, structure: Structure) -> None:
     """Raise :class:`_ContactOverflow` where a solve stopped for want of room for its pairs,
     with capacities that hold those of ``x``, where it stopped."""
     if int(state.status) == Status.CONTACT_OVERFLOW:
+        old = state.reference.pairs.capacity
         pairs = reallocate(jnp.asarray(x), state.reference.pairs, structure.contact, CONTACT_ROOM)
-        raise _ContactOverflow(pairs.capacity)
+        # at least doubled: a fold that outgrew its room mid-way grows on (each try compiles)
+        raise _ContactOverflow(
+            Capacity(*(max(n, 2 * c) for n, c in zip(pairs.capacity, old, strict=True)))
+        )
 
 
 class _Solved(NamedTuple):
