@@ -101,6 +101,16 @@ def _scene_arguments(p: argparse.ArgumentParser, out_help: str) -> None:
         help="time limit in seconds, per fold (default: none)",
     )
     p.add_argument("--float32", action="store_true", help="solve in float32 (default float64)")
+    p.add_argument(
+        "--contact",
+        nargs="?",
+        const=True,
+        default=False,
+        type=_number(float, "a positive length", 0.0, strict=True),
+        metavar="DHAT",
+        help="self-contact: faces kept apart by DHAT, pattern units (default without a value: "
+        "1e-3 of the sheet's diameter); Newton only",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -180,6 +190,7 @@ def _solve_options(args: argparse.Namespace) -> dict[str, Any]:
         max_iter=args.max_iter,
         max_time=args.max_time,
         dtype=jnp.float32 if args.float32 else jnp.float64,
+        contact=args.contact,
     )
 
 

@@ -494,47 +494,31 @@ def contact_energy(
     return jnp.sum(e_pt) + jnp.sum(e_ee)
 
 
-def _pair_hessian(q: Array, on: Array, kind: int, dhat: Array, kappa: Array, exact: Array) -> Array:
-    """(4, 4, 3, 3) one pair's barrier Hessian in its 4 corners ``q`` (4, 3), positive
-    semi-definite: exact, its negative eigenvalues clipped to 0 (``exact``), or the
-    Gauss-Newton part ``e'' g g^T`` in the squared distance ``d2`` (its gradient ``g``)."""
+def _pair_hessian(q: Array, on: Array, kind: int, dhat: Array, kappa: Array) -> Array:
+    """(4, 4, 3, 3) one pair's barrier Hessian in its 4 corners ``q`` (4, 3), its Gauss-Newton
+    part ``e''(d2) g g^T`` in the squared distance ``d2`` (``g`` its gradient): positive
+    semi-definite (the barrier is convex in ``d2``), without the term ``e'(d2) hess(d2)``,
+    which the barrier's fall (``e' < 0``) makes indefinite. (A per-pair eigenvalue clip, as
+    ipc-toolkit's, needs a vmapped ``eigh``, which hangs XLA's CPU runtime here.)"""
     rows = _pt_rows if kind == 1 else _ee_rows
-    flat = q.reshape(12)
-
-    def d2_of(f):
-        return rows(f.reshape(1, 4, 3))[0]
-
-    d2, g = jax.value_and_grad(d2_of)(flat)
+    d2, g = jax.value_and_grad(lambda f: rows(f.reshape(1, 4, 3))[0])(q.reshape(12))
     scale = 1.0 / (dhat * dhat)
-    _, b1, b2 = ipc(jnp.where(on, d2, 1.0 / scale) * scale)
-    gauss_newton = (kappa * b2 * scale * scale) * jnp.outer(g, g)
-
-    def projected(_):
-        full = gauss_newton + (kappa * b1 * scale) * jax.hessian(d2_of)(flat)
-        w, v = jnp.linalg.eigh(full)
-        return (v * jnp.maximum(w, 0.0)) @ v.T
-
-    h = jax.lax.cond(exact & on & (b2 > 0), projected, lambda _: gauss_newton, None)
+    _, _, b2 = ipc(jnp.where(on, d2, 1.0 / scale) * scale)
+    h = (kappa * b2 * scale * scale) * jnp.outer(g, g)
     h = jnp.where(on & jnp.all(jnp.isfinite(h)), h, 0.0)  # a degenerate pair: no curvature
     return h.reshape(4, 3, 4, 3).transpose(0, 2, 1, 3)
 
 
-def pair_hessians(
-    x: Array, pairs: ContactPairs, dhat: Array, kappa: Array, exact: Array | bool
-) -> tuple[Array, Array]:
+def pair_hessians(x: Array, pairs: ContactPairs, dhat: Array, kappa: Array) -> tuple[Array, Array]:
     """``(corners, blocks)``: (P + Q, 4) the vertices of every candidate pair and (P + Q, 4, 4,
-    3, 3) their barrier Hessians' 3 x 3 blocks, each pair's positive semi-definite (see
+    3, 3) the 3 x 3 blocks of their barrier Hessians' positive semi-definite part (see
     :func:`_pair_hessian`; zero for pairs out of reach and padding rows): what Newton adds to
     its assembled Hessian."""
     pt_on = pairs.pt_mask & _apart(pairs.pt, 1)
     ee_on = pairs.ee_mask & _apart(pairs.ee, 2)
-    exact = jnp.asarray(exact)
-    hp = jax.vmap(_pair_hessian, in_axes=(0, 0, None, None, None, None))(
-        x[pairs.pt], pt_on, 1, dhat, kappa, exact
-    )
-    he = jax.vmap(_pair_hessian, in_axes=(0, 0, None, None, None, None))(
-        x[pairs.ee], ee_on, 2, dhat, kappa, exact
-    )
+    each = jax.vmap(_pair_hessian, in_axes=(0, 0, None, None, None))
+    hp = each(x[pairs.pt], pt_on, 1, dhat, kappa)
+    he = each(x[pairs.ee], ee_on, 2, dhat, kappa)
     return jnp.concatenate([pairs.pt, pairs.ee]), jnp.concatenate([hp, he])
 
 

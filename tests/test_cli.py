@@ -199,6 +199,7 @@ def test_version_attribute():
         (["render", "--frames", "1"], "argument --frames: must be 2 or more, got 1"),
         (["render", "--fps", "0"], "argument --fps: must be 1 or more, got 0"),
         (["render", "--dpi", "0"], "argument --dpi: must be 1 or more, got 0"),
+        (["fold", "--contact", "0"], "argument --contact: must be a positive length, got 0"),
     ],
 )
 def test_out_of_range_arguments_are_refused(argv, message, capsys, tmp_path, monkeypatch):
@@ -210,3 +211,12 @@ def test_out_of_range_arguments_are_refused(argv, message, capsys, tmp_path, mon
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+def test_contact_option_parses_to_fold_s_argument():
+    from origami_jax.cli import build_parser
+
+    parse = build_parser().parse_args
+    assert parse(["fold"]).contact is False
+    assert parse(["fold", "--contact"]).contact is True
+    assert parse(["render", "--contact", "0.01"]).contact == 0.01

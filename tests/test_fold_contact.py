@@ -4,6 +4,8 @@ positive semi-definite, and the switches and reports."""
 
 from __future__ import annotations
 
+import importlib
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -87,33 +89,41 @@ def test_two_triangles_pushed_together_stop_at_dhat_and_never_cross():
     assert np.max(np.abs(np.asarray(grad(x)) * fixed)) < 1e-6 * k
 
 
-def test_pair_hessians_are_the_barriers_own_made_positive_semi_definite():
+def test_pair_hessians_are_the_barriers_gauss_newton_part():
     rng = np.random.default_rng(3)
     upper = np.array([[0.3, 0.3, 0.02], [0.9, 0.2, 0.03], [0.2, 0.8, 0.04]])
     x = jnp.asarray(np.concatenate([T, upper + 0.01 * rng.normal(size=(3, 3))]))
     mesh = contact_mesh(np.array([[0, 1, 2], [3, 4, 5]]))
     pairs = all_pairs(mesh, x)
     dhat, kappa = 0.1, 2.0
-    corners, blocks = pair_hessians(x, pairs, dhat, kappa, True)
-    _, gauss = pair_hessians(x, pairs, dhat, kappa, False)
+    corners, blocks = pair_hessians(x, pairs, dhat, kappa)
     rows = np.asarray(corners)
-    full = np.asarray(blocks).transpose(0, 1, 3, 2, 4).reshape(-1, 12, 12)
-    gn = np.asarray(gauss).transpose(0, 1, 3, 2, 4).reshape(-1, 12, 12)
+    gn = np.asarray(blocks).transpose(0, 1, 3, 2, 4).reshape(-1, 12, 12)
     n_pt = pairs.pt.shape[0]
     active = 0
     for r, q in enumerate(rows):
         distance = point_triangle_distance_sq if r < n_pt else edge_edge_distance_sq
 
-        def e(flat, distance=distance):
+        def d2(flat, distance=distance):
             c = flat.reshape(4, 3)
-            return contact_barrier(distance(c[0], c[1], c[2], c[3]), dhat, kappa)
+            return distance(c[0], c[1], c[2], c[3])
 
-        h = np.asarray(jax.hessian(e)(x[q].reshape(12)))
-        w, v = np.linalg.eigh(h)
-        expected = (v * np.maximum(w, 0.0)) @ v.T
-        np.testing.assert_allclose(full[r], expected, atol=1e-9 * (1 + np.abs(h).max()))
+        corners_r = x[q].reshape(12)
+        s = float(d2(corners_r)) / dhat**2
+        g = np.asarray(jax.grad(d2)(corners_r))
+        # the barrier's second derivative in d2 by the hand formula of b(s) = -(s - 1)^2 ln s
+        b2 = -2 * np.log(s) - 4 * (s - 1) / s + (s - 1) ** 2 / s**2 if s < 1 else 0.0
+        expected = kappa * b2 / dhat**4 * np.outer(g, g)
+        np.testing.assert_allclose(gn[r], expected, rtol=1e-10, atol=1e-12 * np.abs(gn).max())
         assert np.linalg.eigvalsh(gn[r]).min() >= -1e-9 * (1 + np.abs(gn[r]).max())
-        active += bool(np.abs(h).max() > 0)
+        # and it is the full Hessian less e'(d2) times the squared distance's Hessian
+        full = np.asarray(
+            jax.hessian(lambda f, d2=d2: contact_barrier(d2(f), dhat, kappa))(corners_r)
+        )
+        b1 = -2 * (s - 1) * np.log(s) - (s - 1) ** 2 / s if s < 1 else 0.0
+        rest = kappa * b1 / dhat**2 * np.asarray(jax.hessian(d2)(corners_r))
+        np.testing.assert_allclose(gn[r] + rest, full, atol=1e-8 * (1 + np.abs(full).max()))
+        active += s < 1
     assert active >= 3  # the test saw pairs inside the barrier's reach
 
 
@@ -128,11 +138,32 @@ def test_contact_switches_and_bad_values():
     assert bare.contact_dhat is None and bare.contact_pairs == 0
 
 
-def test_a_square_base_from_flat_ends_flat_folded_with_layers_apart(shared_patterns):
+def test_a_square_base_from_flat_ends_flat_folded_with_layers_apart(shared_patterns, monkeypatch):
     from origami_jax import io
 
+    fold_module = importlib.import_module("origami_jax.fold")  # the package's fold is the function
+
     cp = io.load(shared_patterns / "origami-simulator" / "Bases" / "squareBase.svg")
+    # room for exactly the flat sheet's pairs: the folding sheet outgrows it, and the fold
+    # starts again with more (counted here), ending where a roomier one does
+    overflows = []
+    check = fold_module._check_room
+
+    def counted(state, x, structure):
+        try:
+            check(state, x, structure)
+        except fold_module._ContactOverflow:
+            overflows.append(state.reference.pairs.capacity)
+            raise
+
+    with monkeypatch.context() as m:
+        m.setattr(fold_module, "CONTACT_ROOM", 1.0)
+        m.setattr(fold_module, "_check_room", counted)
+        tight = fold(cp, contact=True)
+    assert overflows
     result = fold(cp, contact=True)
+    assert tight.converged
+    np.testing.assert_allclose(tight.positions, result.positions, atol=1e-8 * cp.diameter)
     assert result.converged, result.reason
     assert len(result.intersections) == 0 and len(result.through_pi) == 0
     assert len(result.collapsed) == 0

@@ -552,7 +552,7 @@ def assemble(x: Array, problem: Problem, reference: Reference, exact: Array | bo
     contact = None
     if structure.contact is not None and reference.pairs is not None:
         c = problem.params.contact
-        contact = pair_hessians(x, reference.pairs, c.dhat, c.kappa, exact)
+        contact = pair_hessians(x, reference.pairs, c.dhat, c.kappa)
     v = problem.start.shape[0]
     elements = hessian_elements(structure)
     if layout.sparse:
