@@ -1127,6 +1127,10 @@ class Newton:
         # reframed): reframing moves every vertex, so near a solution it would only add the
         # rounding of a rotation found from one small triangle
         unpin = spin > self.free_turn
+        if problem.structure.contact is not None:
+            # reframing turns each piece on its own, past the contact filter: with contact, the
+            # steps stay in the gauge
+            unpin = jnp.zeros((), bool)
         step = jnp.where(ok, jnp.where(unpin, free, step), 0.0)
         if accelerate:
             curve = gauge(problem, self._acceleration(s, problem, x, step, solve))
