@@ -718,6 +718,8 @@ def _fold_once(
 CONTACT_SKIN = 2.0
 #: the first capacity for contact pairs holds this many times the start's
 CONTACT_ROOM = 4.0
+#: a sheet with at most this many pairs of primitives gets room for all of them at once
+CONTACT_ALL_PAIRS = 20_000
 
 
 class _ContactOverflow(Exception):
@@ -744,8 +746,9 @@ def with_contact(
     diameter, or half the least distance between two primitives of the flat sheet that share no
     vertex, if less: a sheet at rest has no pair in reach); the skin :data:`CONTACT_SKIN`
     median triangle altitudes; the barrier's weight
-    :func:`~origami_jax.contact.contact_stiffness`; capacities for :data:`CONTACT_ROOM` times
-    the pairs of the start (or grown from ``capacity``)."""
+    :func:`~origami_jax.contact.contact_stiffness`; capacities for every pair of a sheet with
+    at most :data:`CONTACT_ALL_PAIRS`, else for :data:`CONTACT_ROOM` times the pairs of the
+    start (or grown from ``capacity``)."""
     flat = np.asarray(mesh.vertices, np.float64)
     cmesh = contact_mesh(mesh)
     if dhat is None:
@@ -762,6 +765,14 @@ def with_contact(
             dhat = 0.5 * clearance
     skin = CONTACT_SKIN * 2.0 * default_max_step(mesh)
     x0 = flat if start is None else np.asarray(start, np.float64)
+    v, t, e = cmesh.num_vertices, len(cmesh.triangles), len(cmesh.edges)
+    if capacity is None and v * t + e * (e - 1) // 2 <= CONTACT_ALL_PAIRS:
+        # room for every pair at once, and for boxes over 16 cells each (the most the broad
+        # phase's grid gives on average): a small sheet's pairs never outgrow it (a fold that
+        # does starts again, compiling again)
+        pt, ee = v * t, e * (e - 1) // 2
+        # (an edge pair can be met in several cells before the exact test: raw room to spare)
+        capacity = Capacity(16 * t, 4 * pt, pt, 16 * e, 16 * ee, ee)
     pairs = allocate(x0, cmesh, dhat + skin, capacity, multiplier=CONTACT_ROOM)
     dtype = params.rest_length.dtype
     contact = ContactParams(
@@ -792,10 +803,10 @@ def _check_room(state, x, structure: Structure) -> None:
     if int(state.status) == Status.CONTACT_OVERFLOW:
         old = state.reference.pairs.capacity
         pairs = reallocate(jnp.asarray(x), state.reference.pairs, structure.contact, CONTACT_ROOM)
-        # at least doubled: a fold that outgrew its room mid-way grows on (each try compiles)
-        raise _ContactOverflow(
-            Capacity(*(max(n, 2 * c) for n, c in zip(pairs.capacity, old, strict=True)))
-        )
+        # what overflowed at least doubled: a fold that outgrew its room mid-way grows on (each
+        # try compiles)
+        grown = (max(n, 2 * c) if n > c else c for n, c in zip(pairs.capacity, old, strict=True))
+        raise _ContactOverflow(Capacity(*grown))
 
 
 class _Solved(NamedTuple):
