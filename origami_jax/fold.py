@@ -199,7 +199,8 @@ class FoldResult:
                 + (
                     "fold with contact=True (self-contact keeps layers apart)"
                     if self.contact_dhat is None
-                    else "they crossed where contact could not stop them (a smaller dhat)"
+                    else "contact does not keep apart pieces that meet at a point (copies of "
+                    "one vertex) near that point"
                 )
             )
         if self.converged and self.fold_angle_error_max > 0.1:
