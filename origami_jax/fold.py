@@ -600,7 +600,7 @@ def fold(
     history = history_of(samples)
     touching = {}
     if structure.contact is not None:
-        touching = contact_summary(x, structure, run_params)
+        touching = contact_summary(x, state.reference.pairs, run_params)
     return FoldResult(
         pattern=pattern,
         positions=x,
@@ -785,12 +785,12 @@ def with_contact(
     return structure, params._replace(contact=contact)
 
 
-def contact_summary(x: np.ndarray, structure: Structure, params: FoldParams) -> dict:
-    """The result's contact figures at positions ``x``: ``contact_dhat``, ``contact_pairs``
-    (pairs closer than it) and ``contact_min_ratio`` (the least distance over it)."""
+def contact_summary(x: np.ndarray, pairs, params: FoldParams) -> dict:
+    """The result's contact figures at positions ``x`` over the solve's last candidate
+    ``pairs`` (gathered there): ``contact_dhat``, ``contact_pairs`` (pairs closer than it) and
+    ``contact_min_ratio`` (the least distance of a candidate over it)."""
     dhat = float(params.contact.dhat)
-    x = jnp.asarray(x, params.rest_length.dtype)
-    report = contact_report(x, allocate(x, structure.contact, dhat), dhat)
+    report = contact_report(jnp.asarray(x, params.rest_length.dtype), pairs, dhat)
     return {
         "contact_dhat": dhat,
         "contact_pairs": int(report.num_active),
