@@ -456,6 +456,8 @@ def _draw_fold(
         for letter, segments in _crease_segments(pattern, x, show_facets).items():
             if hide_occluded:
                 segments = _visible_pieces(segments, x[tri], view)
+            if not len(segments):  # every such crease hidden (a flat-folded base from above)
+                continue
             lc = Line3DCollection(
                 segments,
                 colors=ASSIGNMENT_COLORS[letter],

@@ -127,6 +127,32 @@ def test_plot_fold_faces_creases_and_framing(result):
     assert np.allclose(scale, scale[0], rtol=1e-6)
 
 
+def test_plot_fold_leaves_out_a_crease_kind_hidden_everywhere(result, monkeypatch):
+    # a flat-folded base seen from above hides every crease of some kinds under its top layer;
+    # such a kind is left out of the picture (matplotlib refuses an empty 3-D line collection)
+    hidden = {"mountain"}
+    pieces = viz._visible_pieces
+    kinds = {}
+
+    def visible(segments, triangles, view):
+        out = pieces(segments, triangles, view)
+        return out[:0] if kinds.get(id(segments)) in hidden else out
+
+    crease_segments = viz._crease_segments
+
+    def named(pattern, x, show_facets):
+        found = crease_segments(pattern, x, show_facets)
+        kinds.update({id(v): viz.ASSIGNMENT_NAMES[k] for k, v in found.items()})
+        return found
+
+    monkeypatch.setattr(viz, "_visible_pieces", visible)
+    monkeypatch.setattr(viz, "_crease_segments", named)
+    fig = viz.plot_fold(result)
+    fig.canvas.draw()
+    assert set(_lines(fig.axes[0])) == {"border", "valley"}
+    plt.close(fig)
+
+
 def test_plot_fold_facets_and_colour_bar(result):
     fig = viz.plot_fold(result, color="strain", show_facets=True, hide_occluded=False)
     fig.canvas.draw()
