@@ -81,20 +81,18 @@ from origami_jax.fold import (
 from origami_jax.metrics import METRIC_NAMES
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
-from origami_jax.solvers import Dynamics, Newton, Solver, Status, get_solver
+from origami_jax.solvers import Solver, Status, get_solver
 from origami_jax.solvers.base import (
     Problem,
-    check_start,
     default_max_steps,
     rigid_gauge,
     rigid_gauges,
 )
-from origami_jax.solvers.blocksparse import block_plan
-from origami_jax.solvers.dynamics import lumped_mass
-from origami_jax.solvers.newton import hessian_elements, layout_arrays
+from origami_jax.solvers.newton import BATCH_DENSE_MAX
 
 __all__ = [
     "fold_batch",
+    "BATCH_DENSE_MAX",
     "BatchSizes",
     "bucket",
     "problem_sizes",
@@ -104,8 +102,6 @@ __all__ = [
 
 # four padding vertices carry every padded bar and hinge: a unit bar 0-1 and a flat hinge
 _PAD_VERTICES = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
-# the largest padded vertex count that batched Newton solves dense
-BATCH_DENSE_MAX = 512
 # problems of one topology in a call from which fold_batch vmaps them unpadded, with shared
 # index arrays (below it they join the size buckets, whose compiled solves a stream reuses)
 SHARED_TOPOLOGY_MIN = 16
@@ -272,16 +268,7 @@ def _padded(member: _Member, to: BatchSizes, solver: Solver) -> Problem:
         pinned=pinned,
         projectors=projectors,
     )
-    return replace(problem, aux=_padded_aux(solver, member, problem, to))
-
-
-def _padded_aux(solver: Solver, member: _Member, problem: Problem, to: BatchSizes):
-    if isinstance(solver, Newton):
-        elements = [np.asarray(e) for e in hessian_elements(problem.structure)]
-        return layout_arrays(elements, to.vertices, None)
-    if isinstance(solver, Dynamics) and solver.mass != "unit":
-        return _pad_rows(lumped_mass(member.pattern.mesh), to.vertices, 1.0)
-    return None
+    return solver.prepare_batch(problem, member.pattern.mesh)
 
 
 def _start(index: int, pattern: CreasePattern, start) -> np.ndarray:
@@ -370,10 +357,10 @@ def _topology(structure, sizes: BatchSizes) -> tuple:
     return (sizes, *(np.asarray(a).tobytes() for a in arrays))
 
 
-def _problem_axes(solver: Solver) -> Problem:
-    """vmap axes of slots with shared topology: index arrays (and Newton's layout, built
-    from them) unbatched, the rest batched."""
-    aux = None if isinstance(solver, Newton) else 0
+def _problem_axes(shared_aux) -> Problem:
+    """vmap axes of slots with shared topology: index arrays (and the solver's ``shared_aux``,
+    built from them, where it has one) unbatched, the rest batched."""
+    aux = 0 if shared_aux is None else None
     return Problem(
         structure=None, params=0, start=0, pinned=0, projectors=0, tol=0, max_step=0, aux=aux
     )
@@ -411,9 +398,9 @@ def _chunk_size(requested: int | None, n: int, solver: Solver, to: BatchSizes, d
     d = len(devices)
     if requested is None:
         requested = d * (CPU_SLOTS if all(x.platform == "cpu" for x in devices) else SLOTS)
-        if isinstance(solver, Newton):
-            # keep the slots' dense matrices near 256 MB in all
-            per_member = (3 * to.vertices) ** 2 * 8
+        per_member = solver.batch_bytes(to.vertices)
+        if per_member > 0:
+            # keep the slots' working memory (Newton: dense matrices) near 256 MB in all
             fits = 2 ** int(np.log2(max(2**28 // per_member, 1)))
             requested = max(1, min(requested, fits))
     size = min(int(requested), _pow2(n))
@@ -484,10 +471,6 @@ def fold_batch(
         if not isinstance(cp, CreasePattern):
             raise TypeError(f"fold_batch(): problem {k} is a {type(cp).__name__}, not a pattern")
     solver_obj = get_solver(solver)
-    if isinstance(solver_obj, Dynamics) and solver_obj.remove_momentum:
-        raise ValueError("fold_batch(): remove_momentum is not supported (padding has mass)")
-    if isinstance(solver_obj, Newton) and solver_obj.linear_solver == "sparse":
-        raise ValueError("fold_batch(): batched Newton solves dense; use linear_solver='auto'")
     dtype = jnp.dtype(dtype or jnp.result_type(float))
     if dtype == jnp.float64 and not jax.config.jax_enable_x64:
         raise ValueError(
@@ -515,14 +498,8 @@ def fold_batch(
             shared = count[topology] >= (2 if one_pattern else SHARED_TOPOLOGY_MIN)
         key = (m.sizes, topology) if shared else (bucket(m.sizes), None)
         groups.setdefault(key, []).append(m)
-    if isinstance(solver_obj, Newton):
-        for to, _ in groups:
-            if to.vertices > BATCH_DENSE_MAX:
-                raise ValueError(
-                    f"fold_batch(): a problem of {to.vertices} (padded) vertices is too large for "
-                    f"batched dense Newton (<= {BATCH_DENSE_MAX}); use fold() or "
-                    "solver='lbfgs'"
-                )
+    for to, _ in groups:
+        solver_obj.check_batch(to.vertices)
     plan = []
     for (to, topology), group in groups.items():
         size = _chunk_size(chunk_size, len(group), solver_obj, to, devices)
@@ -568,11 +545,12 @@ def _stack(*trees):
     return jax.tree.map(lambda *a: np.stack(a), *trees)
 
 
-def _stacked_shared(members: list[_Member], solver: Solver, layout, dtype) -> Problem:
+def _stacked_shared(members: list[_Member], solver: Solver, shared_aux, dtype) -> Problem:
     """The slots' problems of one topology, unpadded and stacked along the batch axis (NumPy
     leaves, floats in ``dtype``; the leaves that :func:`_problem_axes` shares taken once):
     stiffnesses as per-element arrays (so scalar and per-element ones stack), with the
-    solver's static data (Newton: ``layout``, built once for all slots). Stacked field by field:
+    solver's static data (``shared_aux``, built once for all slots, else each member's
+    ``prepare_batch``). Stacked field by field:
     a problem object per member cost more than the arrays it holds (about 30 us each)."""
     problems = [m.problem for m in members]
     sizes = members[0].sizes
@@ -598,11 +576,10 @@ def _stacked_shared(members: list[_Member], solver: Solver, layout, dtype) -> Pr
             return np.repeat(np.asarray(values, dtype)[:, None], n, axis=1)
         return np.stack([np.broadcast_to(v, (n,)) for v in values]).astype(dtype)
 
-    if isinstance(solver, Newton):
-        aux = layout
-    else:
-        auxes = [_padded_aux(solver, m, m.problem, sizes) for m in members]
-        aux = None if auxes[0] is None else np.stack(auxes).astype(dtype)
+    aux = shared_aux
+    if aux is None:
+        auxes = [solver.prepare_batch(m.problem, m.pattern.mesh).aux for m in members]
+        aux = _float_leaves(_stack(*auxes), dtype)
     return replace(
         problems[0],
         params=FoldParams(
@@ -635,7 +612,6 @@ def _host_problem(problems: list[Problem], axes, dtype) -> Problem:
     )
     floats = (stacked.params, stacked.start, stacked.projectors, stacked.tol, stacked.max_step)
     floats = jax.tree.map(lambda a: np.array(a, dtype), floats)
-    aux = stacked.aux
     return replace(
         stacked,
         params=floats[0],
@@ -643,7 +619,15 @@ def _host_problem(problems: list[Problem], axes, dtype) -> Problem:
         projectors=floats[2],
         tol=floats[3],
         max_step=floats[4],
-        aux=aux.astype(dtype) if isinstance(aux, np.ndarray) and aux.dtype.kind == "f" else aux,
+        aux=_float_leaves(stacked.aux, dtype),
+    )
+
+
+def _float_leaves(tree, dtype):
+    """``tree`` with its floating-point NumPy leaves in ``dtype`` (a solver's ``aux``)."""
+    return jax.tree.map(
+        lambda a: a.astype(dtype) if isinstance(a, np.ndarray) and a.dtype.kind == "f" else a,
+        tree,
     )
 
 
@@ -943,8 +927,9 @@ def _lane_shapes(solver: Solver, problem: Problem, axes, num_edges: int):
     return shapes
 
 
-# the block plans (HessianLayout) of the last topologies folded with shared index arrays
-_BLOCK_LAYOUTS = LruCache(16)
+# the solvers' shared_aux (Newton: a HessianLayout with its block plan) of the last topologies
+# folded with shared index arrays
+_SHARED_AUX = LruCache(16)
 
 
 def _fold_extents(percents: list, targets: np.ndarray) -> np.ndarray:
@@ -971,29 +956,25 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
     problem's wall time and ``max_time`` count the loop iterations it spent in its slot at
     the measured time per iteration.
     """
-    axes = _problem_axes(solver) if shared else 0
     first = group[0]
-    layout = None
-    if shared and isinstance(solver, Newton):
-        # one topology: all slots factor their Newton systems at once (blocksparse); its plan
-        # kept for later calls (a design loop folds the same topology again and again)
-        key = first.topology
-        layout = _BLOCK_LAYOUTS.pop(key, None)
-        if layout is None:
-            st = first.problem.structure
-            elements = [np.asarray(e) for e in hessian_elements(st)]
-            layout = replace(
-                _padded_aux(solver, first, first.problem, to),
-                plan=block_plan(elements, to.vertices),
-            )
-        _BLOCK_LAYOUTS[key] = layout
+    shared_aux = None
+    if shared:
+        # one topology: the solver's data shared by all slots (Newton: the plan that factors
+        # their systems at once), kept for later calls (a design loop folds the same topology
+        # again and again)
+        key = (solver, first.topology)
+        shared_aux = _SHARED_AUX.pop(key, None)
+        if shared_aux is None:
+            shared_aux = solver.shared_aux(first.problem, first.pattern.mesh)
+        _SHARED_AUX[key] = shared_aux
+    axes = _problem_axes(shared_aux) if shared else 0
 
     padded_first = None if shared else _padded(first, to, solver)
 
     def stacked(members: list[_Member]) -> Problem:
         """The problems of ``members`` stacked for the slots (free slots hold ``first``'s)."""
         if shared:
-            return _stacked_shared(members, solver, layout, dtype)
+            return _stacked_shared(members, solver, shared_aux, dtype)
         problems = [padded_first if m is first else _padded(m, to, solver) for m in members]
         return _host_problem(problems, axes, dtype)
 
@@ -1020,8 +1001,8 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
         counts = np.bincount(np.arange(len(segment)) % d, minlength=d).astype(np.int32)
         host_queue = stacked([first if j < 0 else segment[j] for j in member_at])
         queue = _to_devices(host_queue, axes, devices)
-        if getattr(solver, "check_start", None) is not None:  # a user's time step, say
-            check_start(solver, _INITS.setdefault((solver, shared), jax.jit(init))(queue))
+        if solver.checks_start:  # a user's time step, say
+            solver.check_start(_INITS.setdefault((solver, shared), jax.jit(init))(queue))
         if lanes is None:  # free slots, holding copies of the first problem
             problem = _map_batched(lambda a: a[np.zeros(size, int)], axes, host_queue)
             state, _, x_like, angles_like = _lane_shapes(solver, problem, axes, to.bars)

@@ -51,13 +51,11 @@ from origami_jax.metrics import (
 )
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
-from origami_jax.solvers import Newton, Solver, Status, get_solver
+from origami_jax.solvers import Solver, Status, get_solver
 from origami_jax.solvers.base import (
-    check_start,
     default_max_step,
     make_problem,
     positions,
-    prepare,
 )
 
 __all__ = ["FoldResult", "fold", "default_tol"]
@@ -333,7 +331,7 @@ FIRST_ITERATION_COST = 20.0
 
 
 def drive(
-    solver,
+    solver: Solver,
     start,
     advance,
     problem,
@@ -354,7 +352,7 @@ def drive(
     """
     t0 = time.perf_counter()
     state, m, x, angles = jax.block_until_ready(start(problem))
-    check_start(solver, state)
+    solver.check_start(state)
     if retol is not None:
         problem = retol(state, problem)
     samples = [_sample(state, m, 0.0)]
@@ -385,31 +383,10 @@ def drive(
 def _reason(status: Status, m: dict, tol: float, iterations: int, x: np.ndarray, mesh) -> str:
     """Why the solve stopped; a solve that did not converge also names the worst collapsed
     triangle of its result (``x``), if any."""
-    g = m["grad_norm_rel"]
     # only the one message is formatted: fold_batch writes one per problem
+    text = Status(status).describe(m["grad_norm_rel"], tol, iterations)
     if status == Status.CONVERGED:
-        if g <= tol:
-            return f"converged: grad_norm_rel {g:.2e} <= tol {tol:.1e}"
-        return (
-            f"converged: grad_norm_rel {g:.2e} > tol {tol:.1e} is this dtype's rounding "
-            "floor for these stiffnesses (the gradient is noise there)"
-        )
-    if status == Status.MAX_ITER:
-        text = f"iteration limit {iterations} reached: grad_norm_rel {g:.2e} > tol {tol:.1e}"
-    elif status == Status.TIME_LIMIT:
-        text = (
-            f"time limit reached after {iterations} iterations: grad_norm_rel {g:.2e} > "
-            f"tol {tol:.1e}"
-        )
-    elif status == Status.NONFINITE:
-        text = "stopped: non-finite energy or gradient; the last finite iterate is returned"
-    elif status == Status.STALLED:
-        text = (
-            f"stalled at grad_norm_rel {g:.2e} > tol {tol:.1e}: the line search finds no "
-            "decrease (the rounding floor of this dtype, or a kink such as a collapsed triangle)"
-        )
-    else:
-        raise ValueError(f"no reason for status {status!r}")
+        return text
     note = collapse_note(x, mesh)
     return text + (f"; {note}" if note else "")
 
@@ -526,7 +503,7 @@ def fold(
         percent = float(params.percent)
     if path not in ("auto", "direct", "continuation"):
         raise ValueError(f"path must be 'auto', 'direct' or 'continuation', got {path!r}")
-    if contact is not False and not isinstance(solver_obj, Newton):
+    if contact is not False and not solver_obj.supports_contact:
         raise ValueError(
             f"contact: only solver='newton' bounds its steps among contact pairs so far, "
             f"not {solver_obj.name!r}"
@@ -539,7 +516,7 @@ def fold(
     if path == "auto":
         # a given start (or a folded form's own) is where the user wants the solve to begin;
         # the first-order solvers' iterations are many already (dynamics has its own ramp)
-        follows = getattr(solver_obj, "follows_path", False)
+        follows = solver_obj.follows_path
         flat = start is None or is_unfolded(start, mesh)
         path = "continuation" if follows and flat and needs_continuation(mesh) else "direct"
         retry = follows and flat and path == "direct"
@@ -656,7 +633,7 @@ def _fold_once(
             on_chunk,
         )
     else:
-        problem = prepare(solver_obj, make_problem(mesh, structure, params, start, tol), mesh)
+        problem = solver_obj.prepare(make_problem(mesh, structure, params, start, tol), mesh)
         (start_c, advance_c), compile_time = compiled(solver_obj, problem, mesh.num_edges)
         t0 = time.perf_counter()
         state, m, x, angles, samples, out_of_time = drive(
@@ -936,7 +913,7 @@ def _solve_path(
             gap_scale=jnp.asarray(wide**soft * user_gap, dtype),
         )
         problem = make_problem(mesh, structure, at, x, tol, reference=reference)
-        return prepare(solver, problem, mesh)
+        return solver.prepare(problem, mesh)
 
     problem = problem_at(1.0, x, reference)
     (start_c, advance_c), compile_time = compiled(solver, problem, mesh.num_edges)

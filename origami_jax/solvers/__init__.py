@@ -1,6 +1,6 @@
 """Solvers of the folding problem, chosen by name in :func:`origami_jax.fold`."""
 
-from origami_jax.solvers.base import Problem, Solver, Status
+from origami_jax.solvers.base import Problem, Solver, SolverState, Status
 from origami_jax.solvers.dynamics import Dynamics, DynamicsState, origami_simulator
 from origami_jax.solvers.lbfgs import Lbfgs, LbfgsState
 from origami_jax.solvers.newton import Newton, NewtonState
@@ -9,8 +9,13 @@ SOLVERS: dict[str, Solver] = {"lbfgs": Lbfgs(), "dynamics": Dynamics(), "newton"
 
 
 def get_solver(name: str | Solver) -> Solver:
-    """The solver registered under ``name`` (a solver object passes through)."""
+    """The solver registered under ``name`` (a :class:`Solver` object passes through)."""
     if not isinstance(name, str):
+        if not isinstance(name, Solver):
+            raise TypeError(
+                f"solver: a name ({', '.join(sorted(SOLVERS))}) or an origami_jax.solvers.Solver, "
+                f"got {type(name).__name__} (a solver subclasses Solver: see its docstring)"
+            )
         return name
     try:
         return SOLVERS[name]
@@ -25,6 +30,7 @@ __all__ = [
     "get_solver",
     "Problem",
     "Solver",
+    "SolverState",
     "Status",
     "Lbfgs",
     "LbfgsState",

@@ -1,17 +1,62 @@
-"""What every solver shares: the problem pytree, rigid-body gauge, status codes and metrics.
+"""What every solver shares: the solver contract, the problem pytree, rigid-body gauge, status
+codes and metrics.
 
-A solver is an object with ``init(problem) -> state`` and ``run(state, problem, steps) -> state``
-(both pure and jittable; ``run`` advances at most ``steps`` iterations inside one
-``lax.while_loop`` and stops early once the state's status is not RUNNING). Its state has the
-fields ``u``, ``reference``, ``iteration``, ``energy``, ``grad_max``, ``grad_max0`` and
-``status``. Positions are ``problem.start + gauge(problem, state.u)``.
+**The solver contract** is the abstract class :class:`Solver`. A solver is a (hashable,
+immutable: a frozen dataclass, say) subclass that writes two pure, jittable methods:
+
+* ``init(problem) -> state``: the start state;
+* ``step(state, problem) -> state``: one iteration; it sets ``state.status`` to a
+  :class:`Status` other than ``RUNNING`` once the solve is over (converged, stalled, non-finite).
+
+Everything else has a default, and :func:`~origami_jax.fold` and
+:func:`~origami_jax.batch.fold_batch` drive every solver through these methods only:
+
+* ``run(state, problem, steps) -> state``: at most ``steps`` iterations more in one
+  ``lax.while_loop`` (:func:`run_steps`: the one loop of every solver), stopping early once the
+  status is not ``RUNNING``;
+* ``prepare(problem, mesh) -> problem``: attach host-built static data to ``problem.aux``
+  before ``jit`` (default: none);
+* ``prepare_batch(problem, mesh) -> problem``: the same for one member of a ``fold_batch``,
+  whose problem may have more vertices than ``mesh`` (padding: pinned, after the mesh's) and
+  has NumPy leaves; its ``aux`` must stack with the other members' of the same shapes
+  (default: ``prepare``);
+* ``shared_aux(problem, mesh) -> aux | None``: for ``fold_batch`` members of one topology, an
+  ``aux`` they all share (one unbatched copy; it may depend on the index arrays of
+  ``problem.structure`` only), or ``None`` (default) for each member's own;
+* ``check_start(state)``: refuse a start state on the host (raise ``ValueError``), after
+  ``init`` (default: accept; ``fold_batch`` runs ``init`` once more on the host only where it
+  is overridden);
+* ``check_batch(num_vertices)``: refuse to run a ``fold_batch`` of problems padded to
+  ``num_vertices`` vertices (raise ``ValueError``; default: accept);
+* ``batch_bytes(num_vertices) -> int``: working memory of one ``fold_batch`` slot beyond its
+  state (``fold_batch`` keeps its slots' total near 256 MB; default 0);
+* class attributes: ``follows_path`` (``fold(path="auto")`` follows the fold from flat with
+  this solver where a scene needs it; default ``False``), ``supports_contact`` (the solver
+  bounds its steps among contact pairs: ``fold(contact=...)``; default ``False``); ``name``
+  (the result's ``solver``; default the class name, lower case).
+
+**The state** is a ``NamedTuple`` (``fold`` calls ``_replace``) with at least the fields of
+:class:`SolverState`: ``u`` (V, 3) the displacement from ``problem.start`` before the gauge
+(positions are :func:`positions`), ``reference`` what the energy measures against
+(:func:`start_reference` at the start; move it along with the iterates,
+:func:`~origami_jax.energy.update_reference`, so a crease is followed through +-pi),
+``iteration`` (int32), ``energy``, ``grad_max`` (the largest entry of the gradient),
+``grad_max0`` (what ``grad_norm_rel`` divides by: :func:`tolerance_scale`) and ``status``
+(int32 :class:`Status`). Any further fields are the solver's own; ``fold_batch`` vmaps them.
+
+**Termination** is written once, here: :func:`has_converged` (the tolerance, or the gradient
+down to its rounding floor), :class:`Progress` (best energy and gradient; :meth:`Progress.stalled`
+once neither has improved for ``patience`` iterations) and :func:`next_status` (converged, then
+non-finite, then stalled). A solver's ``step`` calls them; what a status means is its
+:attr:`Status.message`.
 """
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, replace
 from enum import IntEnum
-from typing import Any, NamedTuple, Protocol
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -29,6 +74,7 @@ from origami_jax.energy import (
     hinge_terms,
     initial_reference,
     springs_only,
+    update_reference,
 )
 from origami_jax.geometry import dihedral_angles, dihedral_gradients
 from origami_jax.pattern import Mesh, PatternError
@@ -38,6 +84,9 @@ __all__ = [
     "Problem",
     "Progress",
     "Solver",
+    "SolverState",
+    "accept",
+    "run_steps",
     "make_problem",
     "start_reference",
     "has_barriers",
@@ -57,15 +106,55 @@ __all__ = [
 
 
 class Status(IntEnum):
-    """Why a solve stopped (or that it has not)."""
+    """Why a solve stopped (or that it has not). Each code carries its :attr:`message`, a
+    template that :meth:`describe` fills in with the solve's figures."""
 
-    RUNNING = 0
-    CONVERGED = 1
-    MAX_ITER = 2
-    NONFINITE = 3
-    STALLED = 4
-    TIME_LIMIT = 5  # set on the host, between compiled chunks
-    CONTACT_OVERFLOW = 6  # more contact pairs than their capacity: gathered again on the host
+    message: str
+
+    def __new__(cls, value: int, message: str):
+        member = int.__new__(cls, value)
+        member._value_ = value
+        member.message = message
+        return member
+
+    RUNNING = (
+        0,
+        "running after {iterations} iterations: grad_norm_rel {grad_norm_rel:.2e} > tol {tol:.1e}",
+    )
+    CONVERGED = 1, "converged: grad_norm_rel {grad_norm_rel:.2e} <= tol {tol:.1e}"
+    MAX_ITER = (
+        2,
+        "iteration limit {iterations} reached: grad_norm_rel {grad_norm_rel:.2e} > tol {tol:.1e}",
+    )
+    NONFINITE = 3, "stopped: non-finite energy or gradient; the last finite iterate is returned"
+    STALLED = (
+        4,
+        "stalled at grad_norm_rel {grad_norm_rel:.2e} > tol {tol:.1e}: the line search finds no "
+        "decrease (the rounding floor of this dtype, or a kink such as a collapsed triangle)",
+    )
+    # set on the host, between compiled chunks
+    TIME_LIMIT = (
+        5,
+        "time limit reached after {iterations} iterations: grad_norm_rel {grad_norm_rel:.2e} > "
+        "tol {tol:.1e}",
+    )
+    # more contact pairs than their capacity: gathered again on the host
+    CONTACT_OVERFLOW = 6, "stopped: more contact pairs than their capacity"
+
+    def describe(self, grad_norm_rel: float, tol: float, iterations: int) -> str:
+        """:attr:`message` with the solve's figures (a convergence above ``tol``, at the
+        gradient's rounding floor, says so)."""
+        message = self.message
+        if self == Status.CONVERGED and grad_norm_rel > tol:
+            message = CONVERGED_AT_FLOOR
+        return message.format(grad_norm_rel=grad_norm_rel, tol=tol, iterations=iterations)
+
+
+# what Status.CONVERGED says where the gradient stopped at its rounding floor above tol
+CONVERGED_AT_FLOOR = (
+    "converged: grad_norm_rel {grad_norm_rel:.2e} > tol {tol:.1e} is this dtype's rounding "
+    "floor for these stiffnesses (the gradient is noise there)"
+)
 
 
 @jax.tree_util.register_dataclass
@@ -123,6 +212,10 @@ class Progress(NamedTuple):
             best_energy=jnp.where(finite, jnp.minimum(energy, self.best_energy), self.best_energy),
             since_best=jnp.where(improved, 0, self.since_best + 1),
         )
+
+    def stalled(self, patience: int) -> Array:
+        """Neither the energy nor the gradient has improved for ``patience`` iterations."""
+        return self.since_best >= patience
 
 
 def next_status(converged: Array, finite: Array, stalled: Array) -> Array:
@@ -182,25 +275,102 @@ def run_steps(step, state, steps: Array):
     return jax.lax.while_loop(cond, step, state)
 
 
-class Solver(Protocol):
-    name: str
+class SolverState(Protocol):
+    """The fields every solver state has (see the module): a ``NamedTuple`` with these and any
+    of the solver's own."""
 
-    def init(self, problem: Problem): ...
+    u: Array  # (V, 3) displacement from problem.start, before the gauge
+    reference: Reference  # what the energy measures against (unwrap, triangle normals)
+    iteration: Array  # int32
+    energy: Array
+    grad_max: Array  # the largest entry of the gradient
+    grad_max0: Array  # what grad_norm_rel divides by (tolerance_scale)
+    status: Array  # int32 Status
 
-    def run(self, state, problem: Problem, steps: Array): ...
+    def _replace(self, **fields: Any) -> SolverState: ...
 
 
-def check_start(solver, state) -> None:
-    """Let a solver refuse its start state on the host (a user's unstable time step, say)."""
-    hook = getattr(solver, "check_start", None)
-    if hook is not None:
-        hook(state)
+class Solver(ABC):
+    """The solver contract (see the module): write ``init`` and ``step``; the rest has
+    defaults. Subclasses are hashable and immutable (compiled solves are cached per solver):
+    frozen dataclasses, whose fields are the options."""
+
+    # fold(path="auto") follows the fold from flat with this solver where a scene needs it
+    follows_path: ClassVar[bool] = False
+    # the solver bounds its steps among contact pairs (fold(contact=...))
+    supports_contact: ClassVar[bool] = False
+
+    @property
+    def name(self) -> str:
+        """The result's ``solver`` (a dataclass field ``name`` overrides it)."""
+        return type(self).__name__.lower()
+
+    @abstractmethod
+    def init(self, problem: Problem) -> SolverState:
+        """The start state (pure, jittable)."""
+
+    @abstractmethod
+    def step(self, state: SolverState, problem: Problem) -> SolverState:
+        """One iteration (pure, jittable); its status says whether the solve goes on."""
+
+    def run(self, state: SolverState, problem: Problem, steps: Array) -> SolverState:
+        """At most ``steps`` iterations of :meth:`step` more, until the status is not
+        ``RUNNING`` (:func:`run_steps`)."""
+        return run_steps(lambda s: self.step(s, problem), state, steps)
+
+    def prepare(self, problem: Problem, mesh: Mesh) -> Problem:
+        """``problem`` with the solver's host-built static data in ``aux`` (before ``jit``)."""
+        return problem
+
+    def prepare_batch(self, problem: Problem, mesh: Mesh) -> Problem:
+        """:meth:`prepare` of one ``fold_batch`` member: ``problem`` (NumPy leaves) may have
+        more vertices than ``mesh``, padding pinned in place after the mesh's own; its ``aux``
+        must stack with the other members' of these shapes."""
+        return self.prepare(problem, mesh)
+
+    def shared_aux(self, problem: Problem, mesh: Mesh) -> Any:
+        """One ``aux`` shared by every ``fold_batch`` member of this problem's topology (built
+        from its index arrays only, unbatched), or ``None``: each member its own."""
+        return None
+
+    def check_start(self, state: SolverState) -> None:
+        """Refuse a start state on the host (raise ``ValueError``); ``state`` may be a batch's
+        (a leading axis on every field)."""
+        return None  # every start accepted
+
+    @property
+    def checks_start(self) -> bool:
+        """Whether :meth:`check_start` is the solver's own (``fold_batch`` then runs ``init``
+        once more, on the host, to show it the start states)."""
+        return type(self).check_start is not Solver.check_start
+
+    def check_batch(self, num_vertices: int) -> None:
+        """Refuse a ``fold_batch`` of problems padded to ``num_vertices`` vertices (raise
+        ``ValueError``)."""
+        return None  # every size accepted
+
+    def batch_bytes(self, num_vertices: int) -> int:
+        """Working memory of one ``fold_batch`` slot of ``num_vertices`` vertices beyond its
+        state, in bytes (the slots' total is kept near 256 MB)."""
+        return 0
 
 
-def prepare(solver, problem: Problem, mesh: Mesh) -> Problem:
-    """Let a solver attach host-built static data to the problem (before ``jit``)."""
-    hook = getattr(solver, "prepare", None)
-    return problem if hook is None else hook(problem, mesh)
+def check_start(solver: Solver, state) -> None:
+    """``solver.check_start(state)`` (kept for callers of the function)."""
+    solver.check_start(state)
+
+
+def prepare(solver: Solver, problem: Problem, mesh: Mesh) -> Problem:
+    """``solver.prepare(problem, mesh)`` (kept for callers of the function)."""
+    return solver.prepare(problem, mesh)
+
+
+def accept(take: Array, u: Array, state: SolverState, problem: Problem) -> tuple[Array, Reference]:
+    """The end of a step: ``u`` where ``take``, else ``state.u``, and the reference moved along
+    to it (:func:`~origami_jax.energy.update_reference`; the state's where not taken)."""
+    u = jnp.where(take, u, state.u)
+    moved = update_reference(positions(problem, u), problem.structure, state.reference)
+    return u, jax.tree.map(lambda new, old: jnp.where(take, new, old), moved, state.reference)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -45,12 +45,14 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from origami_jax.energy import Reference, springs_only, update_reference
+from origami_jax.energy import Reference, springs_only
 from origami_jax.pattern import Mesh
 from origami_jax.solvers.base import (
     Problem,
     Progress,
+    Solver,
     Status,
+    accept,
     barrier_limit,
     doubled_areas,
     gauge,
@@ -59,7 +61,6 @@ from origami_jax.solvers.base import (
     next_status,
     objective,
     positions,
-    run_steps,
     start_reference,
     stop_closing,
     tolerance_scale,
@@ -134,7 +135,7 @@ def _remove_momentum(v: Array, x: Array, mass: Array) -> Array:
 
 
 @dataclass(frozen=True)
-class Dynamics:
+class Dynamics(Solver):
     """Damped dynamics as a solver (``solver="dynamics"``); see the module for the options.
 
     Attributes:
@@ -190,6 +191,18 @@ class Dynamics:
             return problem
         mass = jnp.asarray(lumped_mass(mesh), problem.start.dtype)
         return dataclasses.replace(problem, aux=mass)
+
+    def prepare_batch(self, problem: Problem, mesh: Mesh) -> Problem:
+        """The vertex masses, the padding's 1 (pinned in place: it never moves)."""
+        if self.mass == "unit":
+            return problem
+        mass = np.ones(problem.start.shape[0])
+        mass[: mesh.num_vertices] = lumped_mass(mesh)
+        return dataclasses.replace(problem, aux=mass)
+
+    def check_batch(self, num_vertices: int) -> None:
+        if self.remove_momentum:
+            raise ValueError("fold_batch(): remove_momentum is not supported (padding has mass)")
 
     def check_start(self, state: DynamicsState) -> None:
         """Refuse a user's time step above the stability limit (host side, after ``init``)."""
@@ -341,17 +354,12 @@ class Dynamics:
         progress = s.progress.update(finite, gmax, value)
         ramped = s.iteration + 1 >= self.ramp_steps
         converged = finite & ramped & has_converged(gmax, s.grad_max0, problem)
-        stalled = ramped & (progress.since_best >= self.patience)
+        stalled = ramped & progress.stalled(self.patience)
         status = next_status(converged, finite, stalled)
         # Euler: on convergence keep the point the gradient was taken at; never keep non-finite
         take = finite & ~converged if self.integrator == "euler" else finite
         keep = lambda new, old: jnp.where(take, new, old)  # noqa: E731
-        u = keep(u, s.u)
-        reference = jax.tree.map(
-            keep,
-            update_reference(positions(problem, u), problem.structure, s.reference),
-            s.reference,
-        )
+        u, reference = accept(take, u, s, problem)
         return DynamicsState(
             u=u,
             v=keep(v, s.v),
@@ -369,9 +377,6 @@ class Dynamics:
             since_uphill=since_uphill,
             progress=progress,
         )
-
-    def run(self, state: DynamicsState, problem: Problem, steps: Array) -> DynamicsState:
-        return run_steps(lambda s: self.step(s, problem), state, steps)
 
     # jax-md style names
     def init_fn(self, problem: Problem) -> DynamicsState:

@@ -16,16 +16,16 @@ import jax.numpy as jnp
 import optax
 from jax import Array
 
-from origami_jax.energy import Reference, update_reference
+from origami_jax.energy import Reference
 from origami_jax.solvers.base import (
     Problem,
     Progress,
+    Solver,
     Status,
+    accept,
     has_converged,
     next_status,
     objective,
-    positions,
-    run_steps,
     start_reference,
     tolerance_scale,
 )
@@ -57,7 +57,7 @@ class LbfgsState(NamedTuple):
 
 
 @dataclass(frozen=True)
-class Lbfgs:
+class Lbfgs(Solver):
     """L-BFGS (``optax.lbfgs`` + zoom line search) on the energy, rigid motions gauged out.
 
     Attributes:
@@ -106,55 +106,46 @@ class Lbfgs:
             progress=Progress.start(u.dtype),
         )
 
-    def run(self, state: LbfgsState, problem: Problem, steps: Array) -> LbfgsState:
+    def step(self, s: LbfgsState, problem: Problem) -> LbfgsState:
+        """One L-BFGS iteration with its line search (pure)."""
         opt = self._optimizer(problem.max_step)
 
-        def body(s: LbfgsState) -> LbfgsState:
-            def f(u):
-                return objective(u, problem, s.reference)
+        def f(u):
+            return objective(u, problem, s.reference)
 
-            value, grad = optax.value_and_grad_from_state(f)(s.u, state=s.opt_state)
-            first = s.iteration == 0
-            g_start = jnp.max(jnp.abs(grad))
-            grad_max0 = s.grad_max0
-            updates, opt_state = opt.update(
-                grad, s.opt_state, s.u, value=value, grad=grad, value_fn=f
-            )
-            u = s.u + updates
-            new_value = optax.tree_utils.tree_get(opt_state, "value")
-            new_grad = optax.tree_utils.tree_get(opt_state, "grad")
-            gmax = jnp.max(jnp.abs(new_grad))
-            finite = jnp.isfinite(new_value) & jnp.isfinite(gmax)
-            # a start that is already stationary (or not finite) takes no step
-            at_rest = first & (g_start == 0)
-            bad_start = first & ~(jnp.isfinite(value) & jnp.isfinite(g_start))
-            finite = finite & ~at_rest & ~bad_start
-            moved = jnp.any(updates != 0)
-            stalls = jnp.where(moved, 0, s.stalls + 1)
-            progress = s.progress.update(finite, gmax, new_value)
-            stalled = (stalls >= self.max_stalls) | (progress.since_best >= self.patience)
-            converged = at_rest | (finite & has_converged(gmax, grad_max0, problem))
-            status = next_status(converged, finite, stalled)
-            # a non-finite step is not taken: the state keeps the last finite iterate
-            keep = lambda new, old: jnp.where(finite, new, old)  # noqa: E731
-            u = keep(u, s.u)
-            reference = jax.tree.map(
-                keep,
-                update_reference(positions(problem, u), problem.structure, s.reference),
-                s.reference,
-            )
-            opt_state = jax.tree.map(keep, opt_state, s.opt_state)
-            return LbfgsState(
-                u=u,
-                opt_state=opt_state,
-                reference=reference,
-                iteration=s.iteration + 1,
-                energy=keep(new_value, value),
-                grad_max=jnp.where(finite, gmax, jnp.where(first, g_start, s.grad_max)),
-                grad_max0=grad_max0,
-                status=status,
-                stalls=stalls,
-                progress=progress,
-            )
-
-        return run_steps(body, state, steps)
+        value, grad = optax.value_and_grad_from_state(f)(s.u, state=s.opt_state)
+        first = s.iteration == 0
+        g_start = jnp.max(jnp.abs(grad))
+        grad_max0 = s.grad_max0
+        updates, opt_state = opt.update(grad, s.opt_state, s.u, value=value, grad=grad, value_fn=f)
+        u = s.u + updates
+        new_value = optax.tree_utils.tree_get(opt_state, "value")
+        new_grad = optax.tree_utils.tree_get(opt_state, "grad")
+        gmax = jnp.max(jnp.abs(new_grad))
+        finite = jnp.isfinite(new_value) & jnp.isfinite(gmax)
+        # a start that is already stationary (or not finite) takes no step
+        at_rest = first & (g_start == 0)
+        bad_start = first & ~(jnp.isfinite(value) & jnp.isfinite(g_start))
+        finite = finite & ~at_rest & ~bad_start
+        moved = jnp.any(updates != 0)
+        stalls = jnp.where(moved, 0, s.stalls + 1)
+        progress = s.progress.update(finite, gmax, new_value)
+        stalled = (stalls >= self.max_stalls) | progress.stalled(self.patience)
+        converged = at_rest | (finite & has_converged(gmax, grad_max0, problem))
+        status = next_status(converged, finite, stalled)
+        # a non-finite step is not taken: the state keeps the last finite iterate
+        keep = lambda new, old: jnp.where(finite, new, old)  # noqa: E731
+        u, reference = accept(finite, u, s, problem)
+        opt_state = jax.tree.map(keep, opt_state, s.opt_state)
+        return LbfgsState(
+            u=u,
+            opt_state=opt_state,
+            reference=reference,
+            iteration=s.iteration + 1,
+            energy=keep(new_value, value),
+            grad_max=jnp.where(finite, gmax, jnp.where(first, g_start, s.grad_max)),
+            grad_max0=grad_max0,
+            status=status,
+            stalls=stalls,
+            progress=progress,
+        )

@@ -90,6 +90,7 @@ from origami_jax.solvers import blocksparse, hostsparse
 from origami_jax.solvers.base import (
     Problem,
     Progress,
+    Solver,
     Status,
     barrier_limit,
     element_floor,
@@ -100,7 +101,6 @@ from origami_jax.solvers.base import (
     piece_labels,
     pin_axes,
     positions,
-    run_steps,
     start_reference,
     tolerance_scale,
 )
@@ -874,7 +874,7 @@ def _shift_of(s: NewtonState, exact: Array | bool) -> Array:
 
 
 @dataclass(frozen=True)
-class Newton:
+class Newton(Solver):
     """Newton's method with exact element Hessians (``solver="newton"``).
 
     Attributes:
@@ -953,6 +953,8 @@ class Newton:
     name: str = "newton"
     # fold() follows the path from flat with this solver where a scene needs it (path="auto")
     follows_path: ClassVar[bool] = True
+    # it bounds its steps among contact pairs (fold(contact=...))
+    supports_contact: ClassVar[bool] = True
 
     def __post_init__(self):
         if self.linear_solver not in ("auto", "dense", "sparse"):
@@ -1310,5 +1312,32 @@ class Newton:
             progress=progress,
         )
 
-    def run(self, state: NewtonState, problem: Problem, steps: Array) -> NewtonState:
-        return run_steps(lambda s: self.step(s, problem), state, steps)
+    # -- fold_batch: every member solves dense ----------------------------------------------
+    def prepare_batch(self, problem: Problem, mesh: Mesh) -> Problem:
+        """The dense Hessian layout of the (padded) problem's own elements."""
+        elements = [np.asarray(e) for e in hessian_elements(problem.structure)]
+        return replace(problem, aux=layout_arrays(elements, problem.start.shape[0], None))
+
+    def shared_aux(self, problem: Problem, mesh: Mesh) -> HessianLayout:
+        """The dense layout of one topology with the block plan that factors all its members
+        at once (:mod:`~origami_jax.solvers.blocksparse`)."""
+        elements = [np.asarray(e) for e in hessian_elements(problem.structure)]
+        v = problem.start.shape[0]
+        return replace(layout_arrays(elements, v, None), plan=blocksparse.block_plan(elements, v))
+
+    def check_batch(self, num_vertices: int) -> None:
+        if self.linear_solver == "sparse":
+            raise ValueError("fold_batch(): batched Newton solves dense; use linear_solver='auto'")
+        if num_vertices > BATCH_DENSE_MAX:
+            raise ValueError(
+                f"fold_batch(): a problem of {num_vertices} (padded) vertices is too large for "
+                f"batched dense Newton (<= {BATCH_DENSE_MAX}); use fold() or solver='lbfgs'"
+            )
+
+    def batch_bytes(self, num_vertices: int) -> int:
+        """The slot's dense (3V x 3V) matrix."""
+        return (3 * num_vertices) ** 2 * 8
+
+
+# the largest padded vertex count that fold_batch's Newton solves (dense)
+BATCH_DENSE_MAX = 512
