@@ -75,6 +75,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -111,6 +112,7 @@ __all__ = [
     "pair_energies",
     "contact_energy",
     "pair_hessians",
+    "add_pair_hessians",
     "ContactReport",
     "contact_report",
     "build_pairs",
@@ -128,6 +130,11 @@ DHAT = 1e-3
 #: The fraction of its distance that :func:`step_bound` keeps between any candidate pair (as
 #: ipc-toolkit's additive CCD).
 STEP_KEEP = 0.1
+#: The contact energy, its Hessian and :func:`step_bound` work on the pairs in play packed into
+#: ``1 / NARROW`` of the candidates' rows (all of them, where more are in play).
+NARROW = 4
+#: ... where the candidates have at least this many rows.
+NARROW_FROM = 8192
 #: ipc-toolkit's mollifier threshold: edge-edge terms fade out where ``|ea x eb|^2`` is below
 #: this times ``|ea|^2 |eb|^2`` at rest (edges within about 1.8 degrees of parallel).
 MOLLIFIER_EPS = 1e-3
@@ -489,9 +496,72 @@ def contact_energy(
     """() the contact energy of positions ``x`` (V, 3) over the candidate ``pairs``:
     ``kappa * sum b(d^2 / dhat^2)`` over the pairs closer than ``dhat`` (``dhat`` in length
     units, ``kappa`` an energy: see :func:`contact_stiffness`). ``rest``: as in
-    :func:`pair_energies`. Its gradient and Hessian are JAX's."""
-    e_pt, e_ee = pair_energies(x, pairs, dhat, kappa, rest)
-    return jnp.sum(e_pt) + jnp.sum(e_ee)
+    :func:`pair_energies`. Its value and derivatives (JAX's, in ``x`` only) are taken over the
+    pairs that may be in reach, packed where they fit (:func:`_within`): the barrier's terms
+    vanish, with their derivatives, beyond ``dhat``."""
+
+    def total(y: Array, few: ContactPairs) -> Array:
+        e_pt, e_ee = pair_energies(y, few, dhat, kappa, rest)
+        return jnp.sum(e_pt) + jnp.sum(e_ee)
+
+    # the packing is a lax.cond: differentiated as it is, its reverse mode keeps both branches'
+    # residuals; its derivative is taken inside each branch instead
+    @jax.custom_jvp
+    def energy_of(y: Array) -> Array:
+        return _within(jax.lax.stop_gradient(y), pairs, dhat, lambda few: total(y, few))
+
+    @energy_of.defjvp
+    def _(primals, tangents):
+        (y,), (t,) = primals, tangents
+        value, grad = _within(
+            jax.lax.stop_gradient(y), pairs, dhat, lambda few: jax.value_and_grad(total)(y, few)
+        )
+        return value, jnp.vdot(grad, t)
+
+    return energy_of(jnp.asarray(x))
+
+
+def _maybe_within(x: Array, pairs: ContactPairs, dhat: Array | float) -> tuple[Array, Array]:
+    """(P,) and (Q,) whether each point-triangle and edge-edge pair may be within ``dhat``: a
+    lower bound on its distance (to the centre of the triangle or of the other edge, less the
+    primitives' radii about their centres) below it; far cheaper than the exact distance."""
+
+    def bound(q: Array, split: int) -> Array:
+        a, b = q[:, :split], q[:, split:]
+        ca, cb = jnp.mean(a, axis=1), jnp.mean(b, axis=1)
+        ra = jnp.max(jnp.sqrt(_dot(a - ca[:, None], a - ca[:, None])), axis=1)
+        rb = jnp.max(jnp.sqrt(_dot(b - cb[:, None], b - cb[:, None])), axis=1)
+        return jnp.sqrt(_dot(ca - cb, ca - cb)) - ra - rb
+
+    pt_on = pairs.pt_mask & _apart(pairs.pt, 1)
+    ee_on = pairs.ee_mask & _apart(pairs.ee, 2)
+    return pt_on & (bound(x[pairs.pt], 1) < dhat), ee_on & (bound(x[pairs.ee], 2) < dhat)
+
+
+def _within(x: Array, pairs: ContactPairs, dhat: Array | float, fn: Callable) -> Array:
+    """``fn(pairs)`` on the pairs that may be within ``dhat`` at ``x`` (:func:`_maybe_within`;
+    their masks cleared elsewhere),
+    packed where they fit (:func:`_narrow`), else on all of them: the barrier's terms and their
+    derivatives are zero beyond ``dhat``."""
+    near_pt, near_ee = _maybe_within(x, pairs, dhat)
+
+    def narrow(p, e):
+        (ip, vp), (ie, ve) = p, e
+        few = ContactPairs(
+            pt=pairs.pt[ip],
+            pt_ids=pairs.pt_ids[ip],
+            pt_mask=vp & near_pt[ip],
+            ee=pairs.ee[ie],
+            ee_ids=pairs.ee_ids[ie],
+            ee_mask=ve & near_ee[ie],
+            x_built=pairs.x_built,
+            radius=pairs.radius,
+            needed=pairs.needed,
+            capacity=pairs.capacity,
+        )
+        return fn(few)
+
+    return _narrow(near_pt, near_ee, narrow, lambda: fn(pairs))
 
 
 def _pair_hessian(q: Array, on: Array, kind: int, dhat: Array, kappa: Array) -> Array:
@@ -512,14 +582,27 @@ def _pair_hessian(q: Array, on: Array, kind: int, dhat: Array, kappa: Array) -> 
 def pair_hessians(x: Array, pairs: ContactPairs, dhat: Array, kappa: Array) -> tuple[Array, Array]:
     """``(corners, blocks)``: (P + Q, 4) the vertices of every candidate pair and (P + Q, 4, 4,
     3, 3) the 3 x 3 blocks of their barrier Hessians' positive semi-definite part (see
-    :func:`_pair_hessian`; zero for pairs out of reach and padding rows): what Newton adds to
-    its assembled Hessian."""
+    :func:`_pair_hessian`; zero for pairs out of reach and padding rows)."""
     pt_on = pairs.pt_mask & _apart(pairs.pt, 1)
     ee_on = pairs.ee_mask & _apart(pairs.ee, 2)
     each = jax.vmap(_pair_hessian, in_axes=(0, 0, None, None, None))
     hp = each(x[pairs.pt], pt_on, 1, dhat, kappa)
     he = each(x[pairs.ee], ee_on, 2, dhat, kappa)
     return jnp.concatenate([pairs.pt, pairs.ee]), jnp.concatenate([hp, he])
+
+
+def add_pair_hessians(
+    x: Array,
+    pairs: ContactPairs,
+    dhat: Array,
+    kappa: Array,
+    add: Callable[[Array, Array], Array],
+) -> Array:
+    """``add(corners, blocks)`` of :func:`pair_hessians` over the pairs within ``dhat`` only
+    (:func:`_within`; the others' are zero): what Newton adds to its assembled Hessian. ``add``
+    gives an array of one shape whatever the number of rows."""
+    x = jnp.asarray(x)
+    return _within(x, pairs, dhat, lambda few: add(*pair_hessians(x, few, dhat, kappa)))
 
 
 class ContactReport(NamedTuple):
@@ -883,6 +966,31 @@ def _closing_speed(dq: Array, split: int) -> Array:
     return jnp.max(speed[:, :split], axis=1) + jnp.max(speed[:, split:], axis=1)
 
 
+def _rows(keep: Array, size: int) -> tuple[Array, Array]:
+    """The indices of the rows ``keep`` selects, packed into ``size`` (index 0 after them), and
+    which of the ``size`` are rows."""
+    place = jnp.cumsum(keep, dtype=jnp.int32) - 1
+    target = jnp.where(keep & (place < size), place, size)
+    n = keep.shape[0]
+    idx = jnp.zeros(size, jnp.int32).at[target].set(jnp.arange(n, dtype=jnp.int32), mode="drop")
+    return idx, jnp.arange(size) < jnp.sum(keep, dtype=jnp.int32)
+
+
+def _narrow(keep_pt: Array, keep_ee: Array, narrow, full, fractions=(NARROW,)):
+    """``narrow(pt_rows, ee_rows)`` on the rows each ``keep`` selects, packed into the first
+    of ``fractions`` (a fraction ``1/f`` of each kind's rows; ``(idx, valid)`` of
+    :func:`_rows`) where they fit; else ``full()``: the pairs in play are a few of the
+    candidates (whose capacity is some times their count), and the work on them is what a solve
+    repeats."""
+    if not fractions or keep_pt.shape[0] + keep_ee.shape[0] < NARROW_FROM:
+        return full()  # a few rows: packing them saves less than its compilation costs
+    sizes = [min(k.shape[0], max(1, k.shape[0] // fractions[0])) for k in (keep_pt, keep_ee)]
+    fits = (jnp.sum(keep_pt) <= sizes[0]) & (jnp.sum(keep_ee) <= sizes[1])
+    rows = (_rows(keep_pt, sizes[0]), _rows(keep_ee, sizes[1]))
+    rest = functools.partial(_narrow, keep_pt, keep_ee, narrow, full, fractions[1:])
+    return jax.lax.cond(fits, lambda: narrow(*rows), rest)
+
+
 def step_bound(
     x: Array,
     dx: Array,
@@ -898,33 +1006,57 @@ def step_bound(
     most at speed ``l`` (:func:`_closing_speed`) stays above ``keep d(0)`` up to
     ``t + (d(t) - keep d(0)) / l``; each of at most ``iterations`` rounds advances every pair
     so (the first round is the one-shot bound ``(1 - keep) d / l``; the next ones let pairs
-    that move apart or slide past each other go further). For the candidate pairs only: a step
-    that moves a vertex farther than what is left of the skin needs the pairs built again
-    first."""
+    that move apart or slide past each other go further, and run on the pairs the first left
+    short of 1 only: :func:`_narrow`). For the candidate pairs only: a step that moves a vertex
+    farther than what is left of the skin needs the pairs built again first."""
     x, dx = jax.lax.stop_gradient(x), jax.lax.stop_gradient(dx)
     pt_on, ee_on = pairs.pt_mask & _apart(pairs.pt, 1), pairs.ee_mask & _apart(pairs.ee, 2)
     qp, qe = x[pairs.pt], x[pairs.ee]
     dp, de = dx[pairs.pt], dx[pairs.ee]
-    speed = jnp.concatenate([_closing_speed(dp, 1), _closing_speed(de, 2)])
-    on = jnp.concatenate([pt_on, ee_on])
-    moving = on & (speed > 0)
-    speed = jnp.where(moving, speed, 1.0)
+    sp, se = _closing_speed(dp, 1), _closing_speed(de, 2)
+    d0 = (jnp.sqrt(_pt_rows(qp)), jnp.sqrt(_ee_rows(qe)))
+    # the first round, on every pair: the one-shot bound from each pair's distance at x
+    first = [
+        jnp.where(on & (l > 0), jnp.minimum((1.0 - keep) * d / jnp.where(l > 0, l, 1.0), 1.0), 1.0)
+        for on, l, d in ((pt_on, sp, d0[0]), (ee_on, se, d0[1]))
+    ]
 
-    def distance(t: Array) -> Array:
-        tp, te = t[: qp.shape[0], None, None], t[qp.shape[0] :, None, None]
-        return jnp.sqrt(jnp.concatenate([_pt_rows(qp + tp * dp), _ee_rows(qe + te * de)]))
+    def rounds(idx_p, valid_p, idx_e, valid_e):
+        # the later rounds on the rows given (padding rows start done, at 1)
+        q = (qp[idx_p], dp[idx_p], qe[idx_e], de[idx_e])
+        goal = (keep * d0[0][idx_p], keep * d0[1][idx_e])
+        t_start = (
+            jnp.where(valid_p, first[0][idx_p], 1.0),
+            jnp.where(valid_e, first[1][idx_e], 1.0),
+        )
+        closing = (sp[idx_p], se[idx_e])
+        speed = tuple(jnp.where(t < 1.0, c, 1.0) for t, c in zip(t_start, closing, strict=True))
 
-    t0 = jnp.where(moving, 0.0, 1.0).astype(x.dtype)
-    goal = keep * distance(jnp.zeros_like(t0))
+        def distance(t):
+            tp, te = t[0][:, None, None], t[1][:, None, None]
+            return jnp.sqrt(_pt_rows(q[0] + tp * q[1])), jnp.sqrt(_ee_rows(q[2] + te * q[3]))
 
-    def more(state):
-        k, t = state
-        return (k < iterations) & jnp.any(t < 1.0)
+        def more(state):
+            k, t = state
+            return (k < iterations) & (jnp.any(t[0] < 1.0) | jnp.any(t[1] < 1.0))
 
-    def advance(state):
-        k, t = state
-        room = jnp.maximum(distance(t) - goal, 0.0)
-        return k + 1, jnp.where(t < 1.0, jnp.minimum(t + room / speed, 1.0), t)
+        def advance(state):
+            k, t = state
+            now = distance(t)
+            t = tuple(
+                jnp.where(tk < 1.0, jnp.minimum(tk + jnp.maximum(dk - g, 0.0) / s, 1.0), tk)
+                for tk, dk, g, s in zip(t, now, goal, speed, strict=True)
+            )
+            return k + 1, t
 
-    _, t = jax.lax.while_loop(more, advance, (0, t0))
-    return jnp.min(t, initial=1.0)
+        _, t = jax.lax.while_loop(more, advance, (1, t_start))
+        return jnp.minimum(jnp.min(t[0], initial=1.0), jnp.min(t[1], initial=1.0))
+
+    def everything():
+        n_p, n_e = first[0].shape[0], first[1].shape[0]
+        every = (jnp.arange(n_p), jnp.ones(n_p, bool), jnp.arange(n_e), jnp.ones(n_e, bool))
+        return rounds(*every)
+
+    # the pairs a step's first look leaves short are fewer still than those in reach
+    short = (first[0] < 1.0, first[1] < 1.0)
+    return _narrow(*short, lambda p, e: rounds(*p, *e), everything, (4 * NARROW, NARROW))

@@ -641,3 +641,51 @@ def test_step_bound_lets_sliding_and_parting_pairs_go_further():
     dx[3:, 2] = 1.0  # moving apart
     assert float(BOUND(x, dx, TWO_PAIRS)) == 1.0
     assert float(BOUND(x, dx, TWO_PAIRS, 0.1, 1)) < 1.0
+
+
+def _unpacked(monkeypatch, fn, *args):
+    """``fn(*args)`` with the pairs in play never packed (every row worked on)."""
+    with monkeypatch.context() as m:
+        m.setattr(contact, "NARROW_FROM", 1 << 62)
+        return jax.jit(fn)(*args)
+
+
+@pytest.mark.parametrize("dhat", [0.08, 1.5])
+def test_packed_pairs_give_what_every_row_gives(monkeypatch, dhat):
+    # a sheet folded in half, its layers 0.05 (+ jitter) apart, with every pair a candidate
+    # (more rows than NARROW_FROM): at dhat 0.08 a few pairs are in reach and are packed, at
+    # 1.5 more than a NARROW-th of them and every row is worked on; both as every row gives
+    x, tri = grid_sheet(8, seed=3, noise=0.1, gap=0.05)
+    mesh = contact_mesh(tri, num_vertices=len(x))
+    pairs = all_pairs(mesh)
+    rows = pairs.pt.shape[0] + pairs.ee.shape[0]
+    assert rows >= contact.NARROW_FROM
+    x = jnp.asarray(x)
+    near = [int(np.sum(k)) for k in contact._maybe_within(x, pairs, dhat)]
+    fits = [
+        n <= k.shape[0] // contact.NARROW for n, k in zip(near, (pairs.pt, pairs.ee), strict=True)
+    ]
+    assert all(fits) == (dhat < 0.1), near
+    kappa = 2.0
+
+    def summed(x):
+        return jnp.sum(jnp.concatenate(contact.pair_energies(x, pairs, dhat, kappa)))
+
+    value, grad = jax.value_and_grad(lambda y: contact_energy(y, pairs, dhat, kappa))(x)
+    want_value, want_grad = jax.value_and_grad(summed)(x)
+    assert float(value) == pytest.approx(float(want_value), rel=1e-12)
+    assert float(value) > 0
+    np.testing.assert_allclose(grad, want_grad, rtol=0, atol=1e-9 * float(jnp.max(abs(want_grad))))
+
+    def diagonal(corners, blocks):
+        return jnp.zeros((len(x), 3, 3)).at[corners].add(blocks[:, jnp.arange(4), jnp.arange(4)])
+
+    added = contact.add_pair_hessians(x, pairs, dhat, kappa, diagonal)
+    want = diagonal(*contact.pair_hessians(x, pairs, dhat, kappa))
+    np.testing.assert_allclose(added, want, rtol=0, atol=1e-9 * float(jnp.max(abs(want))))
+
+    rng = np.random.default_rng(4)
+    for scale in (0.001, 0.01, 0.1):
+        dx = jnp.asarray(scale * rng.normal(size=x.shape))
+        t = float(BOUND(x, dx, pairs))
+        assert t == _unpacked(monkeypatch, step_bound, x, dx, pairs)

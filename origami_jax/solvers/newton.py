@@ -67,7 +67,7 @@ from jax import Array
 
 from origami_jax.barrier import S_MIN, rest_areas
 from origami_jax.caches import LruCache
-from origami_jax.contact import pair_hessians, step_bound
+from origami_jax.contact import add_pair_hessians, step_bound
 from origami_jax.energy import (
     Reference,
     Structure,
@@ -552,7 +552,7 @@ def assemble(x: Array, problem: Problem, reference: Reference, exact: Array | bo
     contact = None
     if structure.contact is not None and reference.pairs is not None:
         c = problem.params.contact
-        contact = pair_hessians(x, reference.pairs, c.dhat, c.kappa)
+        contact = functools.partial(add_pair_hessians, x, reference.pairs, c.dhat, c.kappa)
     v = problem.start.shape[0]
     elements = hessian_elements(structure)
     if layout.sparse:
@@ -580,18 +580,22 @@ def assemble(x: Array, problem: Problem, reference: Reference, exact: Array | bo
         if contact is not None:
             # the sparse pattern is the sheet's: each pair's curvature on its corners' diagonal
             # blocks only (a principal part of a positive semi-definite block stays one)
-            corners, pair_blocks = contact
-            diag = pair_blocks[:, jnp.arange(4), jnp.arange(4)]
-            own = jnp.zeros((v, 3, 3), x.dtype).at[corners].add(diag)
-            own = jnp.einsum("vij,vjk,vlk->vil", proj, own, proj)
+            def diagonal(corners, pair_blocks):
+                diag = pair_blocks[:, jnp.arange(4), jnp.arange(4)]
+                return jnp.zeros((v, 3, 3), x.dtype).at[corners].add(diag)
+
+            own = jnp.einsum("vij,vjk,vlk->vil", proj, contact(diagonal), proj)
             values = values.at[layout.diag_blocks].add(own, mode="drop")
         return values
     matrix = jnp.zeros((v, v, 3, 3), x.dtype)
     for part, e in zip(blocks, elements, strict=True):
         matrix = matrix.at[e[:, :, None], e[:, None, :]].add(part, mode="promise_in_bounds")
     if contact is not None:
-        corners, pair_blocks = contact
-        matrix = matrix.at[corners[:, :, None], corners[:, None, :]].add(pair_blocks)
+
+        def with_pairs(corners, pair_blocks):
+            return matrix.at[corners[:, :, None], corners[:, None, :]].add(pair_blocks)
+
+        matrix = contact(with_pairs)
     matrix = jnp.swapaxes(matrix, 1, 2)  # (V, 3, V, 3)
     return _project_pinned(matrix, problem.pinned, problem.projectors).reshape(-1)
 
