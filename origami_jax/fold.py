@@ -325,9 +325,28 @@ def next_chunk(chunk: int, seconds: float, steps: int) -> int:
     return max(1, min(64 * chunk, int(CHUNK_SECONDS / max(per_step, 1e-9))))
 
 
+def chunk_steps(chunk: int, iterations_left: int, seconds_left, per_step: float) -> int:
+    """The iterations of the next chunk: ``chunk``, but no more than ``iterations_left``, nor
+    than fit in ``seconds_left`` (``None``: no time limit) at ``per_step`` seconds each, and at
+    least one: a solve then stops within about one iteration of its time limit."""
+    steps = min(chunk, iterations_left)
+    if seconds_left is not None:
+        steps = min(steps, max(1, int(seconds_left / max(per_step, 1e-9))))
+    return steps
+
+
 # the first chunk's iterations are guessed to cost this many times the start (one gradient and
 # the metrics), then measured: a guess too low makes only the first chunk longer than planned
 FIRST_ITERATION_COST = 20.0
+
+
+class Pace:
+    """Seconds an iteration, as last measured by :func:`drive`: handed from one ``drive`` to the
+    next of the same compiled solve (the steps of a continuation), whose first chunk is then
+    sized by it instead of by a guess."""
+
+    def __init__(self):
+        self.per_step: float | None = None
 
 
 def drive(
@@ -340,13 +359,16 @@ def drive(
     record_every,
     on_chunk=None,
     retol=None,
+    pace: Pace | None = None,
 ):
     """The host loop of a solve: compiled chunks of iterations until no problem is RUNNING, the
     iteration limit or ``max_time``. Chunks grow (up to 64x at a time) to about a tenth of a second
-    (or stay at ``record_every``); a sample of the metrics is kept after each. Works for one
+    (or stay at ``record_every``), and none plans more iterations than fit in the time left (see
+    :func:`chunk_steps`); a sample of the metrics is kept after each. Works for one
     problem and for a batch (statuses and metrics then have a leading batch axis). ``retol``:
     ``retol(state, problem) -> problem``, applied once the start state is known (a continuation
-    sets each step's tolerance from its start gradient).
+    sets each step's tolerance from its start gradient). ``pace``: the time an iteration took in
+    an earlier ``drive`` of the same solve, updated here (see :class:`Pace`).
 
     Returns ``(state, metrics, positions, angles, samples, out_of_time)``.
     """
@@ -356,25 +378,30 @@ def drive(
     if retol is not None:
         problem = retol(state, problem)
     samples = [_sample(state, m, 0.0)]
-    # a small problem's whole solve fits one chunk: a round trip costs it more than iterations
-    guess = FIRST_ITERATION_COST * (time.perf_counter() - t0)
-    chunk, iterations = record_every or max(1, int(CHUNK_SECONDS / max(guess, 1e-9))), 0
+    pace = Pace() if pace is None else pace
+    per_step = pace.per_step
+    if per_step is None:  # a small problem's whole solve fits one chunk: a round trip costs more
+        per_step = FIRST_ITERATION_COST * (time.perf_counter() - t0)
+    chunk, iterations = record_every or max(1, int(CHUNK_SECONDS / max(per_step, 1e-9))), 0
     out_of_time = False
     while np.any(samples[-1]["status"] == Status.RUNNING) and iterations < max_iter:
-        if max_time is not None and time.perf_counter() - t0 >= max_time:
+        seconds_left = None if max_time is None else max_time - (time.perf_counter() - t0)
+        if seconds_left is not None and seconds_left <= 0:
             out_of_time = True
             break
-        steps = min(chunk, max_iter - iterations)
+        steps = chunk_steps(chunk, max_iter - iterations, seconds_left, per_step)
         t_chunk = time.perf_counter()
         # dispatch returns before the chunk has run: wait for it, or the clock (and the chunk
         # sizes and history times taken from it) would read the dispatch, not the solve
         state, m, x, angles = jax.block_until_ready(advance(state, problem, np.int32(steps)))
         now = time.perf_counter()
         samples.append(_sample(state, m, now - t0))
-        iterations = int(np.max(samples[-1]["iteration"]))
+        done, iterations = iterations, int(np.max(samples[-1]["iteration"]))
+        done = iterations - done  # fewer than planned where the solve stopped inside the chunk
         if on_chunk is not None:
             on_chunk(iterations, samples[-1])
         chunk = next_chunk(chunk, now - t_chunk, steps)
+        per_step = pace.per_step = (now - t_chunk) / max(done, 1)
         if record_every is not None:
             chunk = record_every
     return state, m, x, angles, samples, out_of_time
@@ -448,7 +475,8 @@ def fold(
       params: full energy parameters (overrides ``percent`` and ``stiffness``).
       max_time: stop after about this many seconds of solving (compile time excluded);
         reaching it gives ``converged=False``. The solve checks it between compiled chunks of
-        about a tenth of a second (or one iteration, if longer).
+        about a tenth of a second, none planned longer than the time left at the pace measured,
+        so it stops within about one iteration of ``max_time``.
       record_every: record a ``history`` sample every this many iterations (default: chunks
         that grow to about a tenth of a second each, which costs the solve nothing measurable;
         ``1`` resolves each Newton iteration, at one host round trip per sample).
@@ -924,6 +952,7 @@ def _solve_path(
     samples = [_sample(first, m, 0.0)]  # the start, fully driven, as a direct solve's
     watched = np.asarray(structure.hinge_bars)[: structure.num_creases + structure.num_facets]
     done, step, iterations, calm = 0.0, PATH_FIRST_STEP, 0, True
+    pace = Pace()  # every step runs the same compiled solve
     while True:
         fraction = min(PATH_END, done + step)
         last = fraction >= PATH_END
@@ -945,6 +974,7 @@ def _solve_path(
             record_every,
             None if on_chunk is None else functools.partial(_shifted, on_chunk, iterations),
             retol=retol,
+            pace=pace,
         )
         xk, angles_k = jax.device_get((xk, angles_k))
         _check_room(state, xk, structure)

@@ -3,6 +3,8 @@
 Compiled solvers are cached per shape, so the tests reuse a few small patterns.
 """
 
+import importlib
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -257,3 +259,57 @@ def test_time_limit_and_history_times_count_the_chunks_run_not_their_dispatch():
     assert elapsed < 2.0, elapsed
     times = [s["wall_time"] for s in samples]
     assert times == sorted(times) and times[-1] <= elapsed
+
+
+def test_a_time_limit_holds_to_within_an_iteration(monkeypatch):
+    """``drive`` plans no chunk longer than the time left (at the pace measured so far), so a
+    solve stops within about one iteration of ``max_time``, not one chunk (a tenth of a second).
+    Checked on a clock of its own, each iteration costing 1 ms of it: the chunks of 100
+    iterations end with one of 50 and one of 1 (before: three of 100, 50 ms over). The
+    steps of a continuation share a ``Pace``: a later ``drive`` whose start is quick (its
+    guessed pace ten times too fast) sizes its first chunk by the pace measured instead."""
+    from typing import NamedTuple
+
+    module = importlib.import_module("origami_jax.fold")  # the package's ``fold`` is the function
+    names = ("fold_angle_error_max", "strain_max", "energy", "grad_norm_rel")
+
+    class State(NamedTuple):
+        iteration: np.ndarray
+        status: np.ndarray
+
+    class Clock:
+        now, start_cost = 0.0, 5e-5  # the start: the first chunk guesses 20x its time
+
+        def perf_counter(self):
+            return self.now
+
+    clock = Clock()
+    chunks = []
+
+    def start(problem):
+        clock.now += clock.start_cost
+        return State(np.int32(0), np.int32(Status.RUNNING)), dict.fromkeys(names, 1.0), 0, 0
+
+    def advance(s, problem, steps):
+        clock.now += 1e-3 * int(steps)
+        chunks.append(int(steps))
+        return State(s.iteration + steps, s.status), dict.fromkeys(names, 1.0), 0, 0
+
+    def run(max_time, pace):
+        chunks.clear()
+        t0 = clock.now
+        state, *_, out_of_time = module.drive(
+            get_solver("lbfgs"), start, advance, None, 10**9, max_time, None, pace=pace
+        )
+        assert out_of_time
+        return int(state.iteration), clock.now - t0
+
+    monkeypatch.setattr(module, "time", clock)
+    pace = module.Pace()
+    iterations, elapsed = run(0.2504, pace)
+    assert chunks == [100, 100, 50, 1] and iterations == 251
+    assert 0.2504 <= elapsed < 0.2504 + 1e-3, elapsed
+    assert pace.per_step == pytest.approx(1e-3)
+    clock.start_cost = 5e-6
+    iterations, elapsed = run(0.0305, pace)
+    assert chunks == [30, 1] and 0.0305 <= elapsed < 0.0305 + 1e-3, elapsed

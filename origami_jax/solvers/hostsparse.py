@@ -24,6 +24,10 @@ solve (or the first call that asks about backends), not when the package is impo
   CPU's kernels named (see :func:`openblas_coretype`).
 * **SuperLU** from scipy (a dependency of jax), in symmetric mode without pivoting, when
   neither is installed (a pivot that is not positive counts as a failure, as in Cholesky).
+  Its factorizations are made, used and freed on one thread of this module's own: scipy frees a
+  SuperLU's memory only in the Python thread state that allocated it, and JAX runs each host
+  callback in a fresh one, so a factorization kept for the next callback leaked whole
+  (docs/design-notes/newton.md, "Memory of long sparse solves").
 
 Nothing here changes a process-wide setting unless asked to by :func:`tune` (the OpenBLAS
 kernels above; MKL's OpenMP threads not spinning after each PARDISO call).
@@ -46,6 +50,7 @@ import sys
 import threading
 import warnings
 from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.sparse as sp
@@ -549,11 +554,58 @@ def _factor(indptr, indices, data):
         if numeric is None:
             return None
         return (lambda b: pattern.solve(numeric, b)), (lambda: pattern.release(numeric))
+    key = _on_superlu_thread(_superlu_factor, indptr, indices, data)
+    if key == 0:
+        return None
+    solve_fn = functools.partial(_on_superlu_thread, _superlu_solve, key)
+    return solve_fn, functools.partial(_on_superlu_thread, _superlu_free, key)
+
+
+# scipy's SuperLU records each block it allocates in a dict kept in the current Python thread
+# state, and frees a block only if that dict lists it. JAX runs a host callback on one of XLA's
+# threads in a thread state made for that call and dropped after it, so a factorization kept
+# from one callback to the next (Newton's second solve, ``resolve``) was freed where no dict
+# knew it: none of its memory came back (about a megabyte per Newton iteration on a 248-vertex
+# sheet). Every SuperLU of the solves below lives on one long-lived thread instead: made, used
+# and dropped there, and never handed out (a result holding one would be dropped by the caller).
+_SUPERLU: dict[int, spla.SuperLU] = {}  # read and written only on that thread
+_SUPERLU_KEYS = itertools.count(1)
+_SUPERLU_START = threading.Lock()
+_superlu_thread: tuple[int, ThreadPoolExecutor] | None = None  # (process id, its one worker)
+
+
+def _on_superlu_thread(fn, *args):
+    """``fn(*args)`` run on the SuperLU thread (started on first use, again in a forked child,
+    which inherits no threads), the caller waiting."""
+    global _superlu_thread
+    with _SUPERLU_START:
+        if _superlu_thread is None or _superlu_thread[0] != os.getpid():
+            _SUPERLU.clear()  # a fork's copies: made on a thread this process does not have
+            worker = ThreadPoolExecutor(1, thread_name_prefix="origami-superlu")
+            _superlu_thread = (os.getpid(), worker)
+        worker = _superlu_thread[1]
+    return worker.submit(fn, *args).result()
+
+
+def _superlu_factor(indptr, indices, data) -> int:
+    """(On the SuperLU thread.) The key of the kept factorization, 0 if it does not factor."""
     found = superlu(indptr, indices, data)
     # without pivoting, U's diagonal is D of L D L^T: all positive iff positive definite
     if found is None or not np.all(found[1] > 0):
-        return None
-    return found[0].solve, lambda: None
+        return 0
+    key = next(_SUPERLU_KEYS)
+    _SUPERLU[key] = found[0]
+    return key
+
+
+def _superlu_solve(key: int, rhs: np.ndarray) -> np.ndarray:
+    """(On the SuperLU thread.)"""
+    return _SUPERLU[key].solve(rhs)
+
+
+def _superlu_free(key: int) -> None:
+    """(On the SuperLU thread: where the factorization is dropped, its memory is freed.)"""
+    _SUPERLU.pop(key, None)
 
 
 def symmetric_matrix(indptr, indices, data) -> sp.csr_matrix:
