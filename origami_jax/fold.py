@@ -577,7 +577,8 @@ def fold(
                 start,
                 tol,
                 max_iter,
-                max_time,
+                # the tries that outgrew their room count in the result's time, and in its limit
+                None if max_time is None else max(max_time - lost, 0.0),
                 record_every,
                 on_chunk,
                 path,
