@@ -713,16 +713,21 @@ def _keys(grid: _Grid, c: Array) -> Array:
 def _compact(keep: Array, capacity: int, *columns: Array) -> tuple[Array, list[Array], Array]:
     """The rows ``keep`` selects, packed into ``capacity`` rows (zeros after), their mask and
     how many there were."""
-    n = keep.shape[0]
-    if n == 0:
+    if keep.shape[0] == 0:  # nothing to gather from
         mask = jnp.zeros(capacity, bool)
         return mask, [jnp.zeros(capacity, c.dtype) for c in columns], jnp.int32(0)
+    idx, mask = _rows(keep, capacity)
+    return mask, [jnp.where(mask, c[idx], 0) for c in columns], jnp.sum(keep, dtype=jnp.int32)
+
+
+def _rows(keep: Array, size: int) -> tuple[Array, Array]:
+    """The indices of the rows ``keep`` selects, packed into ``size`` (index 0 after them), and
+    which of the ``size`` are rows."""
     place = jnp.cumsum(keep, dtype=jnp.int32) - 1  # at most the raw capacity: no overflow
-    target = jnp.where(keep & (place < capacity), place, capacity)
-    idx = jnp.zeros(capacity, jnp.int32).at[target].set(jnp.arange(n, dtype=jnp.int32), mode="drop")
-    count = place[-1] + 1
-    mask = jnp.arange(capacity) < count
-    return mask, [jnp.where(mask, c[idx], 0) for c in columns], count
+    target = jnp.where(keep & (place < size), place, size)
+    n = keep.shape[0]
+    idx = jnp.zeros(size, jnp.int32).at[target].set(jnp.arange(n, dtype=jnp.int32), mode="drop")
+    return idx, jnp.arange(size) < jnp.sum(keep, dtype=jnp.int32)
 
 
 def _point_triangle_candidates(x, mesh, grid, t_lo, t_hi, capacity):
@@ -964,16 +969,6 @@ def _closing_speed(dq: Array, split: int) -> Array:
     rel = dq - jnp.mean(dq, axis=1, keepdims=True)
     speed = jnp.sqrt(jnp.sum(rel * rel, axis=2))
     return jnp.max(speed[:, :split], axis=1) + jnp.max(speed[:, split:], axis=1)
-
-
-def _rows(keep: Array, size: int) -> tuple[Array, Array]:
-    """The indices of the rows ``keep`` selects, packed into ``size`` (index 0 after them), and
-    which of the ``size`` are rows."""
-    place = jnp.cumsum(keep, dtype=jnp.int32) - 1
-    target = jnp.where(keep & (place < size), place, size)
-    n = keep.shape[0]
-    idx = jnp.zeros(size, jnp.int32).at[target].set(jnp.arange(n, dtype=jnp.int32), mode="drop")
-    return idx, jnp.arange(size) < jnp.sum(keep, dtype=jnp.int32)
 
 
 def _narrow(keep_pt: Array, keep_ee: Array, narrow, full, fractions=(NARROW,)):
