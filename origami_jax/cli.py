@@ -261,12 +261,9 @@ def _render(args, pattern, stiffness) -> int:
     if not out.parent.is_dir():
         raise FileNotFoundError(f"{out}: the folder {out.parent} does not exist")
     # a missing extra or ffmpeg fails before the fold
-    if suffix == ".html":
-        viz._plotly()
-    else:
-        viz._matplotlib()
+    viz.require("plotly" if suffix == ".html" else "matplotlib")
     if suffix in (".gif", ".mp4"):
-        viz._movie_rc(out)
+        viz.movie_settings(out)
     solve = dict(_solve_options(args), stiffness=stiffness)
     if suffix in (".gif", ".mp4"):
         frames = viz.fold_frames(pattern, args.frames, **solve)

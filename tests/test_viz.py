@@ -21,6 +21,7 @@ from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection  # noq
 from origami_jax import fold, io, patterns, viz  # noqa: E402
 from origami_jax.cli import main  # noqa: E402
 from origami_jax.metrics import shape_error  # noqa: E402
+from origami_jax.viz import figures, hidden, views  # noqa: E402
 
 SOLVER = "lbfgs"  # compiles fastest; every fold in this file shares its compiled code
 
@@ -92,12 +93,12 @@ def test_occluded_parts_of_creases_are_cut_away():
     segment = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]])
     # a triangle above the middle of the segment, seen from straight above
     above = np.array([[[0.4, -1.0, 1.0], [0.6, -1.0, 1.0], [0.5, 2.0, 1.0]]])
-    pieces = viz._visible_pieces(segment, above, np.array([0.0, 0.0, 1.0]))
+    pieces = hidden.visible_pieces(segment, above, np.array([0.0, 0.0, 1.0]))
     assert pieces.shape == (2, 2, 3)
     assert pieces[0, 0, 0] == 0.0 and pieces[1, 1, 0] == 1.0
     assert 0.3 < pieces[0, 1, 0] <= 0.45 and 0.55 <= pieces[1, 0, 0] < 0.7
     # seen from below, nothing hides it
-    kept = viz._visible_pieces(segment, above, np.array([0.0, 0.0, -1.0]))
+    kept = hidden.visible_pieces(segment, above, np.array([0.0, 0.0, -1.0]))
     assert np.array_equal(kept, segment)
 
 
@@ -130,23 +131,24 @@ def test_plot_fold_faces_creases_and_framing(result):
 def test_plot_fold_leaves_out_a_crease_kind_hidden_everywhere(result, monkeypatch):
     # a flat-folded base seen from above hides every crease of some kinds under its top layer;
     # such a kind is left out of the picture (matplotlib refuses an empty 3-D line collection)
-    hidden = {"mountain"}
-    pieces = viz._visible_pieces
+    hidden_kinds = {"mountain"}
+    pieces = figures.visible_pieces
     kinds = {}
 
     def visible(segments, triangles, view):
         out = pieces(segments, triangles, view)
-        return out[:0] if kinds.get(id(segments)) in hidden else out
+        return out[:0] if kinds.get(id(segments)) in hidden_kinds else out
 
-    crease_segments = viz._crease_segments
+    crease_segments = figures.crease_segments
 
     def named(pattern, x, show_facets):
         found = crease_segments(pattern, x, show_facets)
         kinds.update({id(v): viz.ASSIGNMENT_NAMES[k] for k, v in found.items()})
         return found
 
-    monkeypatch.setattr(viz, "_visible_pieces", visible)
-    monkeypatch.setattr(viz, "_crease_segments", named)
+    # the names plot_fold's drawing looks up, in its module
+    monkeypatch.setattr(figures, "visible_pieces", visible)
+    monkeypatch.setattr(figures, "crease_segments", named)
     fig = viz.plot_fold(result)
     fig.canvas.draw()
     assert set(_lines(fig.axes[0])) == {"border", "valley"}
@@ -200,7 +202,7 @@ def test_a_flat_folded_sheet_is_not_seen_edge_on(flat_folded):
     x = x - x.mean(axis=0)
     own = np.linalg.svd(x)[2]  # the sheet's axes, its normal last
     assert np.ptp(x @ own[2]) < 1e-6  # flat
-    camera = viz._view_vector(*viz.DEFAULT_VIEW)
+    camera = views.view_vector(*viz.DEFAULT_VIEW)
     normal = np.cross(camera, [0.0, 0.0, 1.0])
     normal /= np.linalg.norm(normal)
     turn = np.stack([camera, np.cross(normal, camera), normal], axis=1)  # the normal to normal
@@ -209,7 +211,7 @@ def test_a_flat_folded_sheet_is_not_seen_edge_on(flat_folded):
     for points, pattern in [(flat_folded, None), (edge_on, flat_folded.pattern)]:
         fig = viz.plot_fold(points, pattern)
         ax = fig.axes[0]
-        seen_from = viz._view_vector(ax.elev, ax.azim)
+        seen_from = views.view_vector(ax.elev, ax.azim)
         assert abs(seen_from @ _normal(np.asarray(getattr(points, "positions", points)))) > 0.999
         picture = _picture(ax)  # edge-on, it would be a line
         assert min(picture.width, picture.height) > 0.4 * max(picture.width, picture.height)
@@ -345,6 +347,40 @@ def test_mp4_without_ffmpeg_is_a_clear_error(result, tmp_path, monkeypatch):
 
 
 # -- optional dependencies -----------------------------------------------------------------------
+
+
+def test_require_and_movie_settings_check_before_any_work(tmp_path):
+    # what ``origami-jax render`` calls before it folds
+    assert viz.require("matplotlib") is matplotlib
+    with pytest.raises(ValueError, match="'matplotlib' or 'plotly'"):
+        viz.require("pillow")
+    assert viz.movie_settings(str(tmp_path / "fold.gif")) == {}
+    with pytest.raises(ValueError, match="unsupported animation format"):
+        viz.movie_settings(tmp_path / "fold.avi")
+    assert not list(tmp_path.iterdir())
+
+
+def test_no_module_uses_another_modules_private_names():
+    """viz's modules (and the command that draws with them) share only public names: no
+    ``from a import _x``, no ``module._x`` across modules."""
+    import ast
+    from pathlib import Path
+
+    package = Path(viz.__file__).parent
+    for path in [*package.glob("*.py"), package.parent / "cli.py"]:
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        modules = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("origami_jax"):
+                names = [a.name for a in node.names if not a.name.startswith("__")]
+                assert not [n for n in names if n.startswith("_")], (path.name, node.module)
+                modules |= {a.asname or a.name for a in node.names}
+            elif isinstance(node, ast.Import):
+                modules |= {(a.asname or a.name).split(".")[0] for a in node.names}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+                private = node.attr.startswith("_") and not node.attr.startswith("__")
+                assert not (private and node.value.id in modules), (path.name, node.attr)
 
 
 def test_import_does_not_load_plotting_libraries():
