@@ -71,12 +71,12 @@ from origami_jax.energy import (
 from origami_jax.fold import (
     HISTORY_FIELDS,
     FoldResult,
-    _reason,
-    _signature,
     checked_start,
     default_tol,
     measured,
     next_chunk,
+    signature,
+    stop_reason,
 )
 from origami_jax.metrics import METRIC_NAMES
 from origami_jax.pattern import CreasePattern, PatternError
@@ -883,7 +883,7 @@ def _entry_width(slots: int) -> int:
 
 def _compiled_queue(solver, num_edges, axes, devices, width, args):
     """The compiled slot loop for these shapes (cached) and its compile time (0 when cached)."""
-    key = (solver, _signature(args[:5]), num_edges, tuple(devices), width)
+    key = (solver, signature(args[:5]), num_edges, tuple(devices), width)
     hit = _QUEUE_FNS.get(key)
     if hit is not None:
         return hit, 0.0
@@ -918,7 +918,7 @@ def _limits(max_iter: int, max_time: float | None, per_step: float | None) -> tu
 def _lane_shapes(solver: Solver, problem: Problem, axes, num_edges: int):
     """Shapes of the slots' solver state, metrics, positions and angles (cached: tracing the
     solver costs a tenth of a second)."""
-    key = (solver, _signature(problem), num_edges)
+    key = (solver, signature(problem), num_edges)
     shapes = _SHAPES.get(key)
     if shapes is None:
         shapes = _SHAPES[key] = jax.eval_shape(
@@ -1109,7 +1109,7 @@ def _result(member, to, r, out, samples, max_iter, solver, dtype, wall, compile_
         fold_angles=np.asarray(out.angles[r, : s.bars], np.float64),
         converged=status == Status.CONVERGED,
         status=status,
-        reason=_reason(status, metrics, tol, iterations, positions, member.pattern.mesh),
+        reason=stop_reason(status, metrics, tol, iterations, positions, member.pattern.mesh),
         iterations=iterations,
         solver=solver.name,
         percent=float(member.problem.params.percent),

@@ -267,7 +267,8 @@ class FoldResult:
 _CACHE = LruCache()  # the most recently used compiled solves (origami_jax.caches)
 
 
-def _signature(tree) -> tuple:
+def signature(tree) -> tuple:
+    """A compiled function's cache key for arguments ``tree``: its structure, shapes, dtypes."""
     leaves, treedef = jax.tree.flatten(tree)
     return treedef, tuple((np.shape(x), jnp.result_type(x).name) for x in leaves)
 
@@ -298,7 +299,7 @@ def solve_fns(solver: Solver, num_edges: int):
 def compiled(solver: Solver, problem, num_edges: int):
     """``(start, advance)`` of :func:`solve_fns` compiled for this solver and these shapes
     (cached), and the compile time (0 when cached)."""
-    cache_key = (solver, _signature(problem), num_edges)
+    cache_key = (solver, signature(problem), num_edges)
     hit = _CACHE.get(cache_key)
     if hit is not None:
         return hit, 0.0
@@ -407,7 +408,7 @@ def drive(
     return state, m, x, angles, samples, out_of_time
 
 
-def _reason(status: Status, m: dict, tol: float, iterations: int, x: np.ndarray, mesh) -> str:
+def stop_reason(status: Status, m: dict, tol: float, iterations: int, x: np.ndarray, mesh) -> str:
     """Why the solve stopped; a solve that did not converge also names the worst collapsed
     triangle of its result (``x``), if any."""
     # only the one message is formatted: fold_batch writes one per problem
@@ -613,7 +614,7 @@ def fold(
         fold_angles=np.asarray(angles, np.float64),
         converged=status == Status.CONVERGED,
         status=status,
-        reason=_reason(status, m, tol, iterations, x, pattern.mesh),
+        reason=stop_reason(status, m, tol, iterations, x, pattern.mesh),
         iterations=iterations,
         solver=solver_obj.name,
         percent=float(percent),

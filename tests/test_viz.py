@@ -360,29 +360,6 @@ def test_require_and_movie_settings_check_before_any_work(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
-def test_no_module_uses_another_modules_private_names():
-    """viz's modules (and the command that draws with them) share only public names: no
-    ``from a import _x``, no ``module._x`` across modules."""
-    import ast
-    from pathlib import Path
-
-    package = Path(viz.__file__).parent
-    for path in [*package.glob("*.py"), package.parent / "cli.py"]:
-        tree = ast.parse(path.read_text(encoding="utf-8"))
-        modules = set()
-        for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("origami_jax"):
-                names = [a.name for a in node.names if not a.name.startswith("__")]
-                assert not [n for n in names if n.startswith("_")], (path.name, node.module)
-                modules |= {a.asname or a.name for a in node.names}
-            elif isinstance(node, ast.Import):
-                modules |= {(a.asname or a.name).split(".")[0] for a in node.names}
-        for node in ast.walk(tree):
-            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
-                private = node.attr.startswith("_") and not node.attr.startswith("__")
-                assert not (private and node.value.id in modules), (path.name, node.attr)
-
-
 def test_import_does_not_load_plotting_libraries():
     code = (
         "import sys, origami_jax, origami_jax.viz; "

@@ -689,7 +689,7 @@ def load_fold(path: str | os.PathLike, frame: int | None = None) -> CreasePatter
 # writing
 
 
-def _split(obj: Any) -> tuple[CreasePattern, np.ndarray | None, np.ndarray | None]:
+def pattern_and_state(obj: Any) -> tuple[CreasePattern, np.ndarray | None, np.ndarray | None]:
     """(pattern, positions, fold_angles) of a CreasePattern (None, None) or of a result."""
     if isinstance(obj, CreasePattern):
         return obj, None, None
@@ -871,7 +871,7 @@ def save_fold(path: str | os.PathLike, pattern_or_result: Any) -> None:
       ValueError: the result's arrays have the wrong shape or non-finite values.
       OSError: the file cannot be written (nothing is left behind).
     """
-    pattern, positions, angles = _split(pattern_or_result)
+    pattern, positions, angles = pattern_and_state(pattern_or_result)
     data = to_fold_dict(pattern, None if positions is None else pattern_or_result)
     text = json.dumps(data, indent=1, allow_nan=False) + "\n"
     with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:

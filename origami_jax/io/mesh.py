@@ -40,7 +40,7 @@ from typing import Any
 import meshio
 import numpy as np
 
-from origami_jax.io.fold import _split, atomic_path
+from origami_jax.io.fold import atomic_path, pattern_and_state
 from origami_jax.pattern import ASSIGNMENTS
 
 __all__ = ["save_mesh", "mesh_of", "MESH_FORMATS"]
@@ -67,7 +67,7 @@ def _edge_strain(positions: np.ndarray, rest: np.ndarray, pairs: np.ndarray) -> 
 
 def mesh_of(result_or_pattern: Any, with_data: bool = True) -> meshio.Mesh:
     """The :class:`meshio.Mesh` that :func:`save_mesh` writes (with the VTU data if asked)."""
-    pattern, positions, fold_angles = _split(result_or_pattern)
+    pattern, positions, fold_angles = pattern_and_state(result_or_pattern)
     mesh = pattern.mesh
     rest = np.asarray(mesh.vertices, dtype=np.float64)
     if positions is None:
