@@ -12,7 +12,8 @@ Importing the package changes no global JAX setting; enable float64 yourself wit
 environment variable, a thread or an allocator setting, or load a sparse backend (on the first
 sparse solve): the process-wide settings that make large sheets faster are opt-ins,
 :func:`tune_process` (see :mod:`origami_jax.tuning`). Compiled solves are cached per shape, a
-bounded number; :func:`clear_caches` empties the caches.
+bounded number; :func:`clear_caches` empties the caches. :func:`use_compilation_cache` keeps
+compiled code on disk for the next process (an opt-in: it sets JAX's configuration).
 
 The public names below load on first use (JAX with them), so ``import origami_jax`` is cheap
 and the command line answers ``--help`` without importing JAX.
@@ -28,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # pragma: no cover  (what the lazy names are, for type checkers and IDEs)
     from origami_jax import patterns  # noqa: F401
     from origami_jax.batch import fold_batch  # noqa: F401
-    from origami_jax.caches import clear_caches  # noqa: F401
+    from origami_jax.caches import clear_caches, use_compilation_cache  # noqa: F401
     from origami_jax.energy import Barriers, FoldParams, Stiffness, build_energy, energy  # noqa: F401
     from origami_jax.fold import FoldResult, Frame, fold  # noqa: F401
     from origami_jax.io import from_fold_dict, load, save, to_fold_dict  # noqa: F401
@@ -63,6 +64,7 @@ _LAZY: dict[str, str | None] = {
     "to_fold_dict": "origami_jax.io",
     "patterns": None,
     "clear_caches": "origami_jax.caches",
+    "use_compilation_cache": "origami_jax.caches",
     "tune_process": "origami_jax.tuning",
 }
 __all__ = list(_LAZY)

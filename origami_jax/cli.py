@@ -6,17 +6,19 @@ fold; see :mod:`origami_jax.viz`, needs ``pip install "origami-jax[viz]"``).
 
 Arguments are checked when parsed (:func:`build_parser`, which imports neither JAX nor the
 package's modules, so ``--help`` and ``--version`` answer at once; each command imports what it
-needs). Runs in float64 unless ``--float32`` is given. With ``--cache`` it keeps compiled
-solvers in a persistent cache (``$XDG_CACHE_HOME/origami_jax/<machine>``, default
-``~/.cache/origami_jax``, one folder per CPU kind) so a second run on a pattern of the same
-size does not compile again; it is off by default because XLA 0.10 logs a CPU-feature warning
-on every cached load. Bad input prints one line ``error: ...`` and exits with code 2 (a bad
+needs). Runs in float64 unless ``--float32`` is given. ``fold`` and ``render`` keep compiled
+code in the per-user persistent cache (:func:`origami_jax.caches.use_compilation_cache`:
+``$XDG_CACHE_HOME/origami_jax/<machine>``, default ``~/.cache/origami_jax``, one folder per CPU
+kind), so a later run on a pattern of the same shapes loads its solve instead of compiling it;
+``--no-cache`` turns that off. Bad input prints one line ``error: ...`` and exits with code 2 (a bad
 argument: argparse's usage line and ``error: argument ...``, also code 2).
 
 The command (:func:`console_main`: the ``origami-jax`` script and ``python -m origami_jax``),
-unlike the library, sets up its process: float64 (``jax_enable_x64``), the persistent cache,
-the tuning of :func:`origami_jax.tuning.tune_process`, warnings printed on one line
-(``warning: ...``) and matplotlib's non-interactive backend. :func:`main` runs a command in the
+unlike the library, sets up its process: float64 (``jax_enable_x64``), the persistent cache
+(with XLA's C++ log below fatal hidden, ``TF_CPP_MIN_LOG_LEVEL=3`` unless set: jaxlib 0.10
+logs a false CPU-feature alarm for every program it loads from the cache), the tuning of
+:func:`origami_jax.tuning.tune_process`, warnings printed on one line (``warning: ...``) and
+matplotlib's non-interactive backend. :func:`main` runs a command in the
 process as it finds it (float64, the default, then needs ``jax_enable_x64`` on).
 """
 
@@ -111,6 +113,13 @@ def _scene_arguments(p: argparse.ArgumentParser, out_help: str) -> None:
         help="self-contact: faces kept apart by DHAT, pattern units (default without a value: "
         "1e-3 of the sheet's diameter); Newton only",
     )
+    p.add_argument(
+        "--cache",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="keep compiled code in the per-user persistent cache, so the next run of a pattern "
+        "of the same shapes starts sooner (default: on; --no-cache: off)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -141,11 +150,6 @@ def build_parser() -> argparse.ArgumentParser:
         default="auto",
         help="hinge and area barriers (no crease through itself, no collapsed triangle); "
         "auto (default): where a crease folds fully",
-    )
-    f.add_argument(
-        "--cache",
-        action="store_true",
-        help="keep compiled code in a persistent cache (faster next runs; see the module doc)",
     )
     i = sub.add_parser("info", help="describe a crease pattern: counts, pieces, holes, checks")
     i.add_argument("input", help="a .fold or .svg file")
@@ -225,22 +229,6 @@ def _load(args):
     return getattr(patterns, name)(), stiffness
 
 
-def _machine_key() -> str:
-    """A short hash of this machine's CPU model and features (XLA compiles for them)."""
-    import hashlib
-    import platform
-
-    text = platform.machine() + platform.processor()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            text += "".join(
-                line for line in f if line.startswith(("flags", "model name", "Features"))
-            )[:100_000]
-    except OSError:
-        pass
-    return hashlib.sha256(text.encode()).hexdigest()[:12]
-
-
 RENDER_FORMATS = (".png", ".html", ".gif", ".mp4")
 
 
@@ -293,17 +281,17 @@ def _show_warning(message, category, *rest, **kw) -> None:
 def _set_up_process(args: argparse.Namespace) -> None:
     """The command's process-wide settings (see the module docstring); before any solve."""
     float32 = getattr(args, "float32", False)
+    if getattr(args, "cache", False):  # read when XLA loads, so before JAX's first import
+        os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
     if not float32:
         os.environ.setdefault("JAX_ENABLE_X64", "1")
     import jax
 
     jax.config.update("jax_enable_x64", not float32)
     if getattr(args, "cache", False):
-        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        # one cache per CPU kind: code compiled for other CPU features must not be loaded
-        cache = os.path.join(base, "origami_jax", _machine_key())
-        jax.config.update("jax_compilation_cache_dir", cache)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+        from origami_jax.caches import use_compilation_cache
+
+        use_compilation_cache()
     from origami_jax.tuning import tune_process
 
     tune_process()  # large sheets faster: before the first sparse solve loads its backend

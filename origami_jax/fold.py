@@ -40,6 +40,7 @@ from origami_jax.energy import (
     make_structure,
     needs_barriers,
 )
+from origami_jax.exported import compile_stored
 from origami_jax.intersections import INTERSECTION_DEPTH, intersecting_pairs
 from origami_jax.metrics import (
     METRIC_NAMES,
@@ -305,10 +306,13 @@ def compiled(solver: Solver, problem, num_edges: int):
         return hit, 0.0
     start, advance = solve_fns(solver, num_edges)
     t0 = time.perf_counter()
-    start_c = jax.jit(start).lower(problem).compile()
-    state_shape = jax.eval_shape(start, problem)[0]
+    exportable = not solver.host_callbacks(problem)
+    start_c = compile_stored(start, (problem,), (repr(solver), "start", num_edges), exportable)
+    state_shape = start_c.out_info[0]  # not traced again
     steps = jax.ShapeDtypeStruct((), jnp.int32)
-    advance_c = jax.jit(advance).lower(state_shape, problem, steps).compile()
+    advance_c = compile_stored(
+        advance, (state_shape, problem, steps), (repr(solver), "advance", num_edges), exportable
+    )
     compile_time = time.perf_counter() - t0
     _CACHE[cache_key] = (start_c, advance_c)
     return (start_c, advance_c), compile_time
@@ -859,6 +863,10 @@ PATH_HINGE_GAP = 1e-2
 PATH_END = 2.0
 
 
+# jitted: run op by op, its dozens of small programs would each compile anew for every shape
+_initial_reference = jax.jit(initial_reference)
+
+
 def _shifted(on_chunk, offset: int, iterations: int, sample: dict) -> None:
     on_chunk(offset + iterations, sample)
 
@@ -919,7 +927,7 @@ def _solve_path(
     dtype = params.rest_length.dtype
     full = params.percent
     x = np.asarray(mesh.vertices if start is None else start, np.float64)
-    reference = initial_reference(jnp.asarray(x, dtype), structure, params)
+    reference = _initial_reference(jnp.asarray(x, dtype), structure, params)
 
     k = params.stiffness
     crease = jnp.mean(k.crease)

@@ -30,6 +30,9 @@ Everything else has a default, and :func:`~origami_jax.fold` and
   ``num_vertices`` vertices (raise ``ValueError``; default: accept);
 * ``batch_bytes(num_vertices) -> int``: working memory of one ``fold_batch`` slot beyond its
   state (``fold_batch`` keeps its slots' total near 256 MB; default 0);
+* ``host_callbacks(problem) -> bool``: whether its solve of ``problem`` (prepared) calls back
+  to the host, which an exported program cannot hold (:mod:`origami_jax.exported`; default
+  ``False``);
 * class attributes: ``follows_path`` (``fold(path="auto")`` follows the fold from flat with
   this solver where a scene needs it; default ``False``), ``supports_contact`` (the solver
   bounds its steps among contact pairs: ``fold(contact=...)``; default ``False``); ``name``
@@ -353,6 +356,10 @@ class Solver(ABC):
         """Working memory of one ``fold_batch`` slot of ``num_vertices`` vertices beyond its
         state, in bytes (the slots' total is kept near 256 MB)."""
         return 0
+
+    def host_callbacks(self, problem: Problem) -> bool:
+        """Whether the solve of ``problem`` (prepared) calls back to the host."""
+        return False
 
 
 def check_start(solver: Solver, state) -> None:

@@ -1317,6 +1317,10 @@ class Newton(Solver):
         )
 
     # -- fold_batch: every member solves dense ----------------------------------------------
+    def host_callbacks(self, problem: Problem) -> bool:
+        """Sparse solves factor on the host (:mod:`~origami_jax.solvers.hostsparse`)."""
+        return isinstance(problem.aux, HessianLayout) and problem.aux.sparse
+
     def prepare_batch(self, problem: Problem, mesh: Mesh) -> Problem:
         """The dense Hessian layout of the (padded) problem's own elements."""
         elements = [np.asarray(e) for e in hessian_elements(problem.structure)]

@@ -1,0 +1,140 @@
+"""Compiled solves kept on disk as exported programs, so a fresh process skips tracing them.
+
+JAX's persistent compilation cache (:func:`origami_jax.caches.use_compilation_cache`) saves
+XLA's compilation, but a fresh process still traces and lowers each solve before it can look
+the compiled code up: seconds for a Newton solve. With the cache on, :func:`compile_stored`
+also keeps each solve's lowered program (``jax.export``, serialized) in the cache folder, keyed
+by everything the program depends on: the function's name and settings, the arguments'
+structure, shapes and dtypes, the package's source, JAX's version and the backend. A later
+process deserializes it and compiles it, which the persistent cache answers.
+
+A program that cannot be exported (one with host callbacks: sparse Newton's linear solves) is
+compiled as usual. A stored file that cannot be read is replaced.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import pickle
+import tempfile
+from collections.abc import Callable
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import jax
+
+from origami_jax.caches import exported_folder
+
+__all__ = ["compile_stored"]
+
+
+@lru_cache(maxsize=1)
+def _source_digest() -> str:
+    """A hash of the package's source files: a stored program of older code is never used."""
+    h = hashlib.sha256()
+    package = Path(__file__).parent
+    for path in sorted(package.rglob("*.py")):
+        h.update(str(path.relative_to(package)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def _digest(key: Any, treedef, specs: list) -> str:
+    import jaxlib
+
+    text = repr(
+        (
+            key,
+            str(treedef),
+            [(s.shape, s.dtype.name) for s in specs],
+            jax.__version__,
+            jaxlib.__version__,
+            jax.default_backend(),
+            bool(jax.config.jax_enable_x64),
+            _source_digest(),
+        )
+    )
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def _flat(fn: Callable, treedef, out: dict) -> Callable:
+    """``fn`` on a flat list of leaves, returning a flat list; ``out["tree"]``: the output's
+    structure, recorded while it is traced."""
+
+    def flat(*leaves):
+        result = fn(*jax.tree.unflatten(treedef, leaves))
+        out["tree"] = jax.tree.structure(result)
+        return jax.tree.leaves(result)
+
+    return flat
+
+
+def _write(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)  # whole or not at all: another process may be reading it
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _read(path: Path):
+    """``(exported, output treedef)`` stored at ``path``, or ``None``."""
+    from jax import export
+
+    try:
+        out_tree, blob = pickle.loads(path.read_bytes())
+        return export.deserialize(bytearray(blob)), out_tree
+    except FileNotFoundError:
+        return None
+    except Exception:  # a damaged or foreign file: compiled again and replaced
+        return None
+
+
+class _Stored:
+    """A compiled exported program, called with the original function's pytree arguments."""
+
+    def __init__(self, compiled, out_tree, out_avals):
+        self._compiled = compiled
+        self._out_tree = out_tree
+        # as ``Compiled.out_info``: the outputs' shapes and dtypes
+        self.out_info = jax.tree.unflatten(
+            out_tree, [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in out_avals]
+        )
+
+    def __call__(self, *args):
+        return jax.tree.unflatten(self._out_tree, self._compiled(*jax.tree.leaves(args)))
+
+
+def compile_stored(fn: Callable, args: tuple, key: Any, exportable: bool = True) -> Callable:
+    """``fn`` compiled for ``args`` (arrays or ``jax.ShapeDtypeStruct``, any pytree), called
+    like ``fn``, with ``out_info`` (the outputs' shapes and dtypes, as ``jax.stages.Compiled``
+    has). ``key``: what else the program depends on (the function and its settings: hashable,
+    with a ``repr`` that is the same in every process). ``exportable=False``: the program
+    has host callbacks, which ``jax.export`` refuses: compiled as usual.
+
+    Without a folder (:func:`origami_jax.caches.use_compilation_cache` not called) or not
+    exportable, this is ``jax.jit(fn).lower(*args).compile()``."""
+    folder = exported_folder()
+    if folder is None or not exportable:
+        return jax.jit(fn).lower(*args).compile()
+    from jax import export
+
+    leaves, treedef = jax.tree.flatten(args)
+    specs = [jax.ShapeDtypeStruct(jax.numpy.shape(x), jax.numpy.result_type(x)) for x in leaves]
+    path = folder / f"{_digest(key, treedef, specs)}.bin"
+    stored = _read(path)
+    if stored is None:
+        out: dict = {}
+        exported = export.export(jax.jit(_flat(fn, treedef, out)))(*specs)
+        out_tree = out["tree"]
+        _write(path, pickle.dumps((out_tree, bytes(exported.serialize()))))
+    else:
+        exported, out_tree = stored
+    compiled = jax.jit(exported.call).lower(*specs).compile()
+    return _Stored(compiled, out_tree, exported.out_avals)
