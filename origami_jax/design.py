@@ -53,6 +53,7 @@ from jax import Array
 from origami_jax.energy import Barriers, FoldParams, Reference, make_params, make_structure
 from origami_jax.pattern import CreasePattern
 from origami_jax.solvers import Solver, Status, get_solver, hostsparse
+from origami_jax.solvers.assembly import gauged_hessian
 from origami_jax.solvers.base import (
     Problem,
     default_max_step,
@@ -62,11 +63,8 @@ from origami_jax.solvers.base import (
     prepare,
     rigid_gauge,
 )
-from origami_jax.solvers.newton import (
-    HessianLayout,
-    Newton,
-    gauged_hessian,
-)
+from origami_jax.solvers.hessian_layout import HessianLayout
+from origami_jax.solvers.newton import Newton
 
 __all__ = [
     "EquilibriumInfo",

@@ -618,13 +618,13 @@ def test_block_sparse_solve_matches_dense():
     solve's step, unbatched and vmapped, and reports a matrix that is not positive definite."""
     from origami_jax.energy import initial_reference
     from origami_jax.solvers import blocksparse
-    from origami_jax.solvers.newton import (
-        _gauge_scale,
-        _vertex_projectors,
+    from origami_jax.solvers.assembly import (
         element_blocks,
+        gauge_scale,
         gauged_hessian,
-        hessian_layout,
+        vertex_projectors,
     )
+    from origami_jax.solvers.hessian_layout import hessian_layout
 
     cp = patterns.miura_ori(2, 2)
     mesh = cp.mesh
@@ -652,8 +652,8 @@ def test_block_sparse_solve_matches_dense():
     def fast(x, b, shift):
         ref = initial_reference(x, structure, params)
         blocks = element_blocks(x, structure, params, ref, False)
-        proj = _vertex_projectors(x.shape[0], problem.pinned, problem.projectors)
-        return blocksparse.solve(plan, blocks, proj, _gauge_scale(problem), shift, b)
+        proj = vertex_projectors(x.shape[0], problem.pinned, problem.projectors)
+        return blocksparse.solve(plan, blocks, proj, gauge_scale(problem), shift, b)
 
     def dense(x, b):
         ref = initial_reference(x, structure, params)
@@ -683,8 +683,8 @@ def test_block_sparse_solve_matches_dense():
                 element_blocks(
                     x, structure, params, initial_reference(x, structure, params), False
                 ),
-                _vertex_projectors(x.shape[0], problem.pinned, problem.projectors),
-                _gauge_scale(problem),
+                vertex_projectors(x.shape[0], problem.pinned, problem.projectors),
+                gauge_scale(problem),
                 mu,
                 b,
             )

@@ -340,7 +340,7 @@ def _factor(plan: BlockPlan, blocks: list[Array], proj: Array, scale: Array, mu:
     """Factor ``H + mu |diag H| + floor`` for the gauged Hessian ``H`` of one problem.
 
     ``blocks`` the element Hessians (bars (E, 2, 2, 3, 3), then hinges (H, 4, 4, 3, 3), as
-    :func:`origami_jax.solvers.newton.element_blocks` gives them); ``proj`` (V, 3, 3) each
+    :func:`origami_jax.solvers.assembly.element_blocks` gives them); ``proj`` (V, 3, 3) each
     vertex's gauge projector (identity but at pinned vertices); ``scale`` the stiffness put on
     the pinned-out directions; ``mu`` the Levenberg-Marquardt shift relative to the diagonal.
     With a trailing batch axis on every argument but ``plan`` (``proj`` (V, 3, 3, B)), the

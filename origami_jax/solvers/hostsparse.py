@@ -3,7 +3,7 @@
 The symmetric matrix comes as CSR arrays ``(indptr, indices, data)`` of its **upper triangle**
 (diagonal included; the same arrays are the lower triangle's CSC, which CHOLMOD reads), already
 in a fill-reducing order (the nested dissection of
-:func:`origami_jax.solvers.newton.hessian_layout`), each row's column indices increasing.
+:func:`origami_jax.solvers.hessian_layout.hessian_layout`), each row's column indices increasing.
 Three backends, the first available picked (:func:`backend`), each looked for on the first sparse
 solve (or the first call that asks about backends), not when the package is imported:
 

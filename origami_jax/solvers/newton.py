@@ -1,13 +1,12 @@
 """Newton's method on the same energy, with the exact Hessian assembled from element Hessians.
 
-Each iteration assembles the Hessian of the energy from per-element blocks: bars (6 x 6, in
-closed form) and torsion hinges (12 x 12, from the closed-form gradient and Hessian of the
-atan2 dihedral: :func:`~origami_jax.geometry.dihedral_hessians`). Far from equilibrium the
-Hessian can be indefinite, so the method works with two matrices:
+Each iteration assembles the Hessian of the energy from per-element blocks
+(:mod:`origami_jax.solvers.assembly`: bars, torsion hinges and barrier triangles, in closed
+form). Far from equilibrium the Hessian can be indefinite, so the method works with two
+matrices:
 
-* the **convex part** (always positive semi-definite): each bar's Hessian with its compressive
-  (negative) transverse term dropped, and each hinge's Gauss-Newton term
-  ``k l0 grad(rho) grad(rho)^T``, which drops ``k l0 (rho - goal) hess(rho)``;
+* the **convex part** (always positive semi-definite): the bars' compressive terms and the
+  hinges' and barriers' curvature terms dropped (see :mod:`~origami_jax.solvers.assembly`);
 * the **exact Hessian**, tried once the previous iteration took the full, unlimited Newton step
   and no longer one (the quadratic region: a step that the line search could double, see
   ``expansions``, shows the convex part still overstating the curvature, where the exact
@@ -29,21 +28,22 @@ A Levenberg-Marquardt shift ``mu * |diag(H)|`` (``mu`` from ``mu_min``, grown 10
 1e-10, whenever no step is found, and shrunk 10x with every step taken) keeps the system
 non-singular on mechanisms and free hinges. Its floor ``mu_min`` is 0: a shift that stays
 makes the last iterations converge linearly where the exact step
-converges quadratically. Rigid motions are gauged out as in the other solvers (the pinned
-vertices' blocks are projected, their complement set to a stiffness-sized identity); but a step
+converges quadratically. Rigid motions are gauged out as in the other solvers
+(:func:`~origami_jax.solvers.assembly.gauged_hessian`); but a step
 that would turn the sheet (by more than ``free_turn``) is taken free of the gauge: its
 infinitesimal rigid motion is removed, the sheet moves, and each piece is then turned rigidly
-back so that its pinned triangle lies where the gauge holds it (:func:`rigid_free`,
-:func:`reframe`). The step is bent by geodesic acceleration (``acceleration``: a second solve
+back so that its pinned triangle lies where the gauge holds it
+(:mod:`origami_jax.solvers.reframe`: :func:`rigid_free`, :func:`reframe`). The step is bent by
+geodesic acceleration (``acceleration``: a second solve
 with the same factor corrects the bar lengths' and fold angles' second-order change along the
 step), limited by ``max_turn`` and backtracked (Armijo) on the energy.
 
 The linear system is solved dense (Cholesky, inside ``jit``; vmap-able) for small patterns and
 sparse for large ones, on the host through ``jax.pure_callback``
 (:mod:`origami_jax.solvers.hostsparse`: MKL's PARDISO or CHOLMOD where installed, else
-SuperLU) in a fill-reducing nested-dissection order of the flat pattern. A batch of one topology
-(``fold_batch``'s shared index arrays) factors all its members at once with the block-sparse
-Cholesky of :mod:`origami_jax.solvers.blocksparse` instead.
+SuperLU) in a fill-reducing order (:mod:`origami_jax.solvers.hessian_layout`). A batch of one
+topology (``fold_batch``'s shared index arrays) factors all its members at once with the
+block-sparse Cholesky of :mod:`origami_jax.solvers.blocksparse` instead.
 
 Example:
   >>> from origami_jax import fold, patterns
@@ -55,19 +55,16 @@ Example:
 from __future__ import annotations
 
 import functools
-import weakref
 from dataclasses import dataclass, replace
 from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.sparse as sp
 from jax import Array
 
-from origami_jax.barrier import S_MIN, rest_areas
-from origami_jax.caches import LruCache
-from origami_jax.contact import add_pair_hessians, step_bound
+from origami_jax.barrier import S_MIN
+from origami_jax.contact import step_bound
 from origami_jax.energy import (
     Reference,
     Structure,
@@ -83,10 +80,16 @@ from origami_jax.geometry import (
     bar_lengths,
     dihedral_angles,
     dihedral_gradients,
-    dihedral_hessians,
 )
 from origami_jax.pattern import Mesh
 from origami_jax.solvers import blocksparse, hostsparse
+from origami_jax.solvers.assembly import (
+    assemble,  # noqa: F401
+    element_blocks,
+    gauge_scale,
+    gauged_hessian,
+    vertex_projectors,
+)
 from origami_jax.solvers.base import (
     Problem,
     Progress,
@@ -98,523 +101,28 @@ from origami_jax.solvers.base import (
     has_barriers,
     has_converged,
     next_status,
-    piece_labels,
-    pin_axes,
     positions,
     start_reference,
     tolerance_scale,
 )
-from origami_jax.solvers.blocksparse import BlockPlan
-from origami_jax.solvers.innermost import batch_innermost
-
-__all__ = [
-    "Newton",
-    "NewtonState",
-    "HessianLayout",
-    "hessian_layout",
-    "layout_arrays",
-    "element_blocks",
-    "hessian_elements",
-    "assemble",
-]
-
-
-@functools.partial(
-    jax.tree_util.register_dataclass,
-    data_fields=[
-        "order",
-        "diag_blocks",
-        "indptr",
-        "indices",
-        "blocks",
-        "block_vertices",
-        "block_entries",
-        "block_slots",
-        "vertex_blocks",
-        "piece",
-        "plan",
-    ],
-    meta_fields=[],
+from origami_jax.solvers.hessian_layout import (
+    UPPER_PAIRS,  # noqa: F401
+    HessianLayout,
+    hessian_elements,
+    hessian_layout,
+    layout_arrays,
 )
-@dataclass(frozen=True)
-class HessianLayout:
-    """Where the element Hessians go in the assembled (3V x 3V) matrix.
+from origami_jax.solvers.innermost import batch_innermost
+from origami_jax.solvers.reframe import (
+    reframe,
+    rigid_fit,
+    rigid_free,  # noqa: F401
+)
 
-    ``order`` (3V,) position of each degree of freedom in the solved system (a fill-reducing
-    order for the sparse solve); ``diag_blocks`` (V, 3, 3) the storage slots of each vertex's
-    diagonal block. Sparse: ``indptr``/``indices`` the CSR pattern of the **upper triangle**
-    in that order (the matrix is symmetric: the host factorization reads only that half, which
-    halves the assembly) and slots index its data; a diagonal block's entries below the
-    diagonal have the slot past the end (dropped). Dense: both empty and slots index the flat
-    matrix.
-
-    The solver scatters 3 x 3 vertex blocks, dense straight into the (V, 3, V, 3) matrix;
-    sparse into B stored blocks, one per vertex pair ``(i, j)``, ``i`` first in the order,
-    twice: ``blocks`` (K,) the stored block of each corner pair ``a <= b`` of the bars (E, 3)
-    then hinges (H, 10) (:data:`UPPER_PAIRS`), plus B where the corners come in the other
-    order (a second copy that holds transposed blocks: no transpose of the element blocks),
-    ``block_vertices`` (B, 2) the row and column vertex of each, ``block_entries`` (N, 2) the
-    two entries of the flat (2B, 3, 3) blocks whose sum each CSR value takes, ``block_slots``
-    (B, 9) the CSR slot of each block's entries (N below a diagonal block's diagonal),
-    ``vertex_blocks`` (V, D) the stored blocks in each vertex's row or column (padded with 2B)
-    (all five empty when dense).
-
-    ``piece`` (V,): the connected piece of each vertex, numbered as the gauge numbers its
-    pinned triangles (by lowest vertex; -1 for a vertex on no bar).
-
-    ``plan``: for a dense layout shared by a vmapped batch of one topology (``fold_batch``),
-    the :class:`~origami_jax.solvers.blocksparse.BlockPlan` that solves all members at once;
-    ``None`` otherwise.
-    """
-
-    order: Array
-    diag_blocks: Array
-    indptr: Array
-    indices: Array
-    blocks: Array
-    block_vertices: Array
-    block_entries: Array
-    block_slots: Array
-    vertex_blocks: Array
-    piece: Array
-    plan: BlockPlan | None = None
-
-    @property
-    def sparse(self) -> bool:
-        return self.indptr.shape[0] > 0
-
-    @property
-    def size(self) -> int:
-        return int(self.order.shape[0])
-
-    @property
-    def storage(self) -> int:
-        return int(self.indices.shape[0]) if self.sparse else self.size**2
-
-
-# the corner pairs (a, b), a <= b, of an element of 2 (bar), 3 (triangle) or 4 (hinge) corners,
-# as the arrays of their a and of their b: the upper triangle of its symmetric Hessian, all that
-# the sparse assembly computes
-UPPER_PAIRS = {k: np.triu_indices(k) for k in (2, 3, 4)}
-
-
-def hessian_elements(structure: Structure) -> list:
-    """The vertex index arrays of the elements whose Hessians the energy's is assembled from, in
-    the order of :func:`element_blocks`: bars, then hinges and barrier triangles where the
-    scene has them."""
-    return [structure.bars] + [e for e in (structure.hinges, structure.triangles) if e.shape[0]]
-
-
-def _element_pairs(elements: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Rows and columns of every (a, b) pair of indices within each element, elements of each
-    (n_el, k) array in turn (the entries their Hessian blocks touch)."""
-    rows = np.concatenate([np.repeat(e, e.shape[1], axis=1).ravel() for e in elements])
-    cols = np.concatenate([np.tile(e, (1, e.shape[1])).ravel() for e in elements])
-    return rows, cols
-
-
-def nested_dissection(xy: np.ndarray, adjacency: sp.csr_matrix, leaf: int = 16) -> np.ndarray:
-    """A fill-reducing vertex order: split the flat sheet at the median of its longer side, put
-    the vertices touching the other half (the separator) last, recurse on both halves (down to
-    ``leaf`` vertices: 16 factors a 100 x 100 Miura-ori a quarter faster than 64)."""
-    out: list[np.ndarray] = []
-
-    def visit(idx: np.ndarray) -> None:
-        if len(idx) <= leaf:
-            out.append(idx)
-            return
-        p = xy[idx]
-        axis = int(np.argmax(p.max(axis=0) - p.min(axis=0)))
-        below = p[:, axis] <= np.median(p[:, axis])
-        left, right = idx[below], idx[~below]
-        if len(left) == 0 or len(right) == 0:
-            out.append(idx)
-            return
-        touches = np.asarray(adjacency[left][:, right].sum(axis=1)).ravel() > 0
-        visit(left[~touches])
-        visit(right)
-        out.append(left[touches])
-
-    visit(np.arange(len(xy)))
-    return np.concatenate(out)
-
-
-_LAYOUTS = LruCache()  # the most recently used meshes' layouts (origami_jax.caches)
-
-
-def hessian_layout(mesh: Mesh, structure: Structure, sparse: bool) -> HessianLayout:
-    """The assembly layout of a mesh's Hessian (cached per mesh; device arrays)."""
-    # the elements depend on the barriers built: a mesh has a layout per set of them
-    key = (id(mesh), sparse, structure.barriers, structure.num_free, structure.triangles.shape[0])
-    hit = _LAYOUTS.get(key)
-    if hit is not None and hit[0]() is mesh:
-        return hit[1]
-    elements = [np.asarray(e) for e in hessian_elements(structure)]
-    vertex_order = None
-    if sparse:
-        vr, vc = _element_pairs(elements)
-        v = mesh.num_vertices
-        adjacency = sp.csr_matrix((np.ones(len(vr)), (vr, vc)), shape=(v, v))
-        vertex_order = nested_dissection(mesh.vertices[:, :2], adjacency)
-    layout = jax.tree.map(jnp.asarray, layout_arrays(elements, mesh.num_vertices, vertex_order))
-    _LAYOUTS[key] = (weakref.ref(mesh), layout)
-    return layout
-
-
-def _vertex_pieces(bars: np.ndarray, num_vertices: int) -> np.ndarray:
-    """(V,) the connected piece of each vertex over the bars, pieces ranked by their lowest
-    vertex (the order of :func:`~origami_jax.solvers.base.rigid_gauges`); -1 off every bar
-    (padding vertices of a batch form pieces past the pinned ones, which the gauge ignores)."""
-    label = piece_labels(bars, num_vertices)
-    on_bar = np.zeros(num_vertices, bool)
-    on_bar[bars.ravel()] = True
-    _, rank = np.unique(label[on_bar], return_inverse=True)  # sorted: by lowest vertex
-    out = np.full(num_vertices, -1, np.int32)
-    out[on_bar] = rank
-    return out
-
-
-def layout_arrays(
-    elements: list[np.ndarray], num_vertices: int, vertex_order: np.ndarray | None
-) -> HessianLayout:
-    """A :class:`HessianLayout` of NumPy arrays for :func:`hessian_elements` ``elements`` (bars
-    first): sparse in ``vertex_order`` when one is given, else dense (slots index the flat
-    3V x 3V matrix)."""
-    v = num_vertices
-    n = 3 * v
-    bars = elements[0]
-    parts = [e for e in elements if len(e)]
-    diag = np.arange(v)[:, None, None] * 3 + np.arange(3)
-    diag_r = np.broadcast_to(diag, (v, 3, 3)).ravel()
-    diag_c = np.broadcast_to(diag.transpose(0, 2, 1), (v, 3, 3)).ravel()
-    sparse = vertex_order is not None
-    if sparse:
-        rank = np.empty(v, np.int64)
-        rank[vertex_order] = np.arange(v)
-        order = (rank[:, None] * 3 + np.arange(3)).ravel()
-    else:
-        order = np.arange(n)
-    none = np.zeros(0, np.int32)
-    if sparse:
-        # the corner pairs a <= b of every element (in turn), and the stored block (the vertex
-        # pair, first in the order first) each goes to, transposed when the order swaps them
-        vr, vc = (
-            np.concatenate([e[:, UPPER_PAIRS[e.shape[1]][k]].ravel() for e in parts])
-            for k in (0, 1)
-        )
-        lo, hi = np.minimum(rank[vr], rank[vc]), np.maximum(rank[vr], rank[vc])
-        diagonal = np.arange(v) * (v + 1)  # every vertex has its diagonal block
-        block_keys, blocks = np.unique(np.concatenate([lo * v + hi, diagonal]), return_inverse=True)
-        num = len(block_keys)
-        blocks = blocks[: len(vr)] + num * (rank[vr] > rank[vc])
-        bi, bj = block_keys // v, block_keys % v
-        # the upper triangle's entries, block by block: all 9 off the diagonal, 6 on it
-        i, j = np.divmod(np.arange(9), 3)
-        keep = (bi[:, None] < bj[:, None]) | (i <= j)[None, :]
-        block, entry = np.nonzero(keep)
-        r, c = 3 * bi[block] + i[entry], 3 * bj[block] + j[entry]
-        sort = np.argsort(r * n + c, kind="stable")
-        r, c, block, entry = r[sort], c[sort], block[sort], entry[sort]
-        indptr = np.searchsorted(r, np.arange(n + 1)).astype(np.int32)
-        indices = c.astype(np.int32)
-        i, j = np.divmod(entry, 3)
-        block_entries = np.stack([block * 9 + entry, (num + block) * 9 + j * 3 + i], axis=1)
-        block_slots = np.full((num, 9), len(r))
-        block_slots[block, entry] = np.arange(len(r))
-        stored, wanted = r * n + c, order[diag_r] * n + order[diag_c]
-        at = np.minimum(np.searchsorted(stored, wanted), len(r) - 1)
-        diag_blocks = np.where(stored[at] == wanted, at, len(r)).reshape(v, 3, 3)
-        block_vertices = vertex_order[np.stack([bi, bj], axis=1)]
-        vertex_blocks = _vertex_blocks(block_vertices, v, 2 * num)
-    else:
-        diag_blocks = (diag_r * n + diag_c).reshape(v, 3, 3)
-        indptr, indices, blocks, block_entries = none, none, none, np.zeros((0, 2), np.int32)
-        block_slots = np.zeros((0, 9), np.int32)
-        block_vertices, vertex_blocks = np.zeros((0, 2), np.int32), np.zeros((0, 0), np.int32)
-    return HessianLayout(
-        piece=_vertex_pieces(bars, v),
-        order=order.astype(np.int32),
-        diag_blocks=diag_blocks.astype(np.int32),
-        indptr=indptr,
-        indices=indices,
-        blocks=blocks.astype(np.int32),
-        block_vertices=block_vertices.astype(np.int32),
-        block_entries=block_entries.astype(np.int32),
-        block_slots=block_slots.astype(np.int32),
-        vertex_blocks=vertex_blocks.astype(np.int32),
-    )
-
-
-def _vertex_blocks(block_vertices: np.ndarray, v: int, pad: int) -> np.ndarray:
-    """(V, D) the blocks whose row or column vertex is each vertex, padded with ``pad``."""
-    num = len(block_vertices)
-    ids = np.arange(num)
-    off = block_vertices[:, 0] != block_vertices[:, 1]
-    vertex = np.concatenate([block_vertices[:, 0], block_vertices[off, 1]])
-    block = np.concatenate([ids, ids[off]])
-    order = np.argsort(vertex, kind="stable")
-    vertex, block = vertex[order], block[order]
-    counts = np.bincount(vertex, minlength=v)
-    out = np.full((v, max(int(counts.max(initial=0)), 1)), pad)
-    out[vertex, np.arange(len(vertex)) - np.repeat(np.cumsum(counts) - counts, counts)] = block
-    return out
-
-
-def element_blocks(
-    x: Array,
-    structure: Structure,
-    params,
-    reference: Reference,
-    exact: Array | bool,
-    upper: bool = False,
-) -> list[Array]:
-    """The element Hessians as 3 x 3 blocks of vertex pairs, in the order of
-    :func:`hessian_elements`: bars (E, 2, 2, 3, 3), then hinges (H, 4, 4, 3, 3) and barrier
-    triangles (T, 3, 3, 3, 3) if any (``[e, a, b]`` the block of rows of corner ``a``, columns
-    of ``b``); with ``upper`` only the pairs ``a <= b`` of :data:`UPPER_PAIRS`: (E, 3, 3, 3),
-    (H, 10, 3, 3), (T, 6, 3, 3).
-
-    A hinge's energy ``e(rho)`` (spring and barrier) has the Hessian
-    ``e'' grad(rho) grad(rho)^T + e' hess(rho)``, a triangle's barrier ``e(r)`` of its area
-    ratio ``r`` likewise. ``exact`` selects the exact Hessian; otherwise its convex part (the
-    bars' compressive term and the ``e' hess`` terms dropped; ``e'' >= 0`` for every term),
-    positive semi-definite.
-
-    With a trailing batch axis (``x`` (V, 3, B), see :mod:`origami_jax.solvers.innermost`), the
-    blocks have it last.
-    """
-    dtype = x.dtype
-    trailing = x.shape[2:]  # a batch innermost (batch_innermost), elementwise
-    ones = (None,) * len(trailing)
-    p = x[structure.bars]
-    l0 = params.rest_length
-    d = p[:, 1] - p[:, 0]
-    length = jnp.sqrt(jnp.sum(d * d, axis=1))
-    dh = d / jnp.maximum(length, jnp.finfo(dtype).tiny)[:, None]
-    transverse = 1.0 - l0 / jnp.maximum(length, jnp.finfo(dtype).tiny)
-    transverse = jnp.where(exact, transverse, jnp.maximum(transverse, 0.0))
-    k = params.stiffness.axial / l0
-    outer = dh[:, :, None] * dh[:, None, :]
-    eye = jnp.eye(3, dtype=dtype)[(..., *ones)]
-    a = k[:, None, None] * (outer + transverse[:, None, None] * (eye - outer))
-    sign = jnp.array([[1.0, -1.0], [-1.0, 1.0]], dtype)
-    if upper:
-        out = [sign[UPPER_PAIRS[2]][(None, slice(None), None, None, *ones)] * a[:, None]]
-    else:
-        out = [sign[(None, slice(None), slice(None), None, None, *ones)] * a[:, None, None]]
-    if structure.hinges.shape[0]:
-        kl = hinge_weights(structure, params)[1]
-        q = x[structure.hinges]
-        g = dihedral_gradients(q)
-        pairs = list(zip(*UPPER_PAIRS[4], strict=True)) if upper else None
-        pad = (slice(None),) + (None,) * (3 if upper else 4)
-        barrier = structure.barriers.hinge_gap > 0
-        # a barrier's curvature depends on the angle, a spring's does not: the angle (and its
-        # dihedral) only where needed
-        rho = dihedral_angles(q, reference.angles) if barrier else None
-        d2 = hinge_terms(rho, structure, params)[2] if barrier else kl
-
-        def gauss_newton():  # in each branch: computed once, where it is used
-            full = g[:, :, None, :, None] * g[:, None, :, None, :]
-            if upper:
-                # all 16 outer products and then the 10: a gather of the corners first made
-                # XLA read them strided, several times slower
-                full = full[(slice(None), *UPPER_PAIRS[4])]
-            return d2[pad] * full
-
-        def with_curvature(weight=1.0):
-            # the angle's own Hessian is most of an iteration's work on small patterns: only
-            # when asked
-            angle = rho if barrier else dihedral_angles(q, reference.angles)
-            d1 = hinge_terms(angle, structure, params)[1]
-            h = dihedral_hessians(q, pairs)
-            return gauss_newton() + (weight * d1)[pad] * h
-
-        if isinstance(exact, bool):
-            out.append(with_curvature() if exact else gauss_newton())
-        else:
-            # vmapped (fold_batch), a cond on each member's flag would run both branches; on
-            # whether any member wants the curvature it runs one, and the members that do not
-            # get a zero weight
-            # (upper: the branches give flat blocks, which the scatter then reads in place; their
-            # (H, 10, 3, 3) result was copied whole first)
-            shape = (-1, 3, 3, *trailing) if upper else (-1, 4, 4, 3, 3, *trailing)
-            blocks = jax.lax.cond(
-                _any_member(jnp.any(exact)),
-                lambda: with_curvature(exact.astype(dtype)).reshape(shape),
-                lambda: gauss_newton().reshape(shape),
-            )
-            out.append(blocks.reshape(-1, 10, 3, 3, *trailing) if upper else blocks)
-    if structure.triangles.shape[0]:
-        out.append(_triangle_blocks(x, structure, params, reference, exact, upper))
-    return out
-
-
-def _skew(v: Array) -> Array:
-    """(T, 3, 3, ...) the matrices ``[v]`` with ``[v] w = v x w`` of vectors ``v`` (T, 3, ...)."""
-    z = jnp.zeros_like(v[:, 0])
-    v0, v1, v2 = v[:, 0], v[:, 1], v[:, 2]
-    rows = ([z, -v2, v1], [v2, z, -v0], [-v1, v0, z])
-    return jnp.stack([jnp.stack(r, axis=1) for r in rows], axis=1)
-
-
-def _triangle_blocks(x, structure, params, reference, exact, upper):
-    """The area barrier's element Hessians: (T, 3, 3, 3, 3), or (T, 6, 3, 3) with ``upper``.
-
-    With ``n = (p1 - p0) x (p2 - p0)`` and ``J_k = dn / dp_k`` (``[p2 - p1]``, ``-[p2 - p0]``,
-    ``[p1 - p0]`` as cross-product matrices), the area ``|n| / 2`` has the gradient
-    ``J_k^T n^ / 2`` and the Hessian ``(J_j^T (I - n^ n^T) J_k / |n| + K_jk) / 2``, ``K`` the
-    constant second derivative of ``n^ . n`` (``-[n^]`` for the pairs (0, 1), (1, 2), (2, 0))."""
-    trailing = x.shape[2:]
-    ones = (None,) * len(trailing)
-    ratio, _, d1, d2 = triangle_terms(x, structure, params, reference.normals)
-    p = x[structure.triangles]  # (T, 3, 3, ...)
-    p0, p1, p2 = p[:, 0], p[:, 1], p[:, 2]
-    jac = [_skew(p2 - p1), -_skew(p2 - p0), _skew(p1 - p0)]
-    n = jnp.einsum("tij...,tj...->ti...", jac[2], p2 - p0)  # (p1 - p0) x (p2 - p0)
-    norm = jnp.sqrt(jnp.sum(n * n, axis=1))
-    safe = jnp.where(norm > 0, norm, 1.0)
-    unit = n / safe[:, None]
-    l0 = params.rest_length[structure.triangle_bars]
-    area0 = rest_areas(l0)
-    # d(ratio)/d(area): the sign of the area (turned over: negative) over the rest area
-    scale = jnp.sign(ratio) / jnp.where(area0 > 0, area0, 1.0)
-    grads = [0.5 * jnp.einsum("tji...,tj...->ti...", j, unit) for j in jac]
-    eye = jnp.eye(3, dtype=x.dtype)[(..., *ones)]
-    proj = (eye - unit[:, :, None] * unit[:, None, :]) / safe[:, None, None]
-    k_skew = -_skew(unit)
-    corner_pairs = (
-        list(zip(*UPPER_PAIRS[3], strict=True))
-        if upper
-        else [(a, b) for a in range(3) for b in range(3)]
-    )
-
-    def block(a, b):
-        outer = (d2 * scale * scale)[:, None, None] * (grads[a][:, :, None] * grads[b][:, None, :])
-        if isinstance(exact, bool) and not exact:
-            return outer
-        curvature = jnp.einsum("tki...,tkl...,tlj...->tij...", jac[a], proj, jac[b])
-        if (a, b) in ((0, 1), (1, 2), (2, 0)):
-            curvature = curvature + k_skew
-        elif (b, a) in ((0, 1), (1, 2), (2, 0)):
-            curvature = curvature - k_skew
-        weight = (0.5 * d1 * scale * jnp.asarray(exact, x.dtype))[:, None, None]
-        return outer + weight * curvature
-
-    blocks = jnp.stack([block(a, b) for a, b in corner_pairs], axis=1)
-    return blocks if upper else blocks.reshape(-1, 3, 3, 3, 3, *trailing)
-
-
-@jax.custom_batching.custom_vmap
-def _any_member(flag: Array) -> Array:
-    """``flag`` itself; vmapped, whether any member's is set (unbatched), so that a
-    ``lax.cond`` on it stays a branch instead of becoming a select of both."""
-    return flag
-
-
-@_any_member.def_vmap
-def _any_member_vmap(axis_size, in_batched, flag):
-    return (jnp.any(flag), False) if in_batched[0] else (flag, False)
-
-
-def _vertex_projectors(v: int, pinned: Array, projectors: Array) -> Array:
-    """(V, 3, 3) each vertex's gauge projector: ``projectors`` at ``pinned``, else identity."""
-    eye = jnp.eye(3, dtype=projectors.dtype)
-    return jnp.broadcast_to(eye, (v, 3, 3)).at[pinned].set(projectors)
-
-
-def _project_pinned(matrix: Array, pinned: Array, projectors: Array) -> Array:
-    """``P matrix P`` for a (V, 3, V, 3) matrix and P block-diagonal: ``projectors`` (P, 3, 3)
-    at the ``pinned`` vertices (a vertex repeated carries the same projector: batch padding),
-    identity elsewhere; only their rows and columns change (broadcast sums: XLA's CPU einsum
-    of such small dims is several times slower)."""
-    v = matrix.shape[0]
-    if pinned.shape[0] >= v:  # batch padding pins every padding vertex: project all at once
-        proj = _vertex_projectors(v, pinned, projectors)
-        matrix = jnp.sum(proj[:, :, :, None, None] * matrix[:, None], axis=2)
-        return jnp.sum(matrix[..., None] * proj[None, None], axis=3)
-    rows = jnp.sum(projectors[:, :, :, None, None] * matrix[pinned][:, None], axis=2)
-    matrix = matrix.at[pinned].set(rows)
-    cols = matrix[:, :, pinned]
-    cols = jnp.sum(cols[..., None] * projectors[None, None], axis=3)
-    return matrix.at[:, :, pinned].set(cols)
-
-
-def assemble(x: Array, problem: Problem, reference: Reference, exact: Array | bool) -> Array:
-    """Storage values of the gauged Hessian (exact or its convex part) in ``problem.aux``'s
-    layout, before the pinned directions' identity.
-
-    ``P (sum H_e) P`` with P block-diagonal (the pinned vertices' projectors, else identity)
-    equals projecting every element block, at a fraction of the cost."""
-    layout: HessianLayout = problem.aux
-    structure = problem.structure
-    blocks = element_blocks(x, structure, problem.params, reference, exact, upper=layout.sparse)
-    contact = None
-    if structure.contact is not None and reference.pairs is not None:
-        c = problem.params.contact
-        contact = functools.partial(add_pair_hessians, x, reference.pairs, c.dhat, c.kappa)
-    v = problem.start.shape[0]
-    elements = hessian_elements(structure)
-    if layout.sparse:
-        proj = _vertex_projectors(v, problem.pinned, problem.projectors)
-        num = layout.block_vertices.shape[0]
-        matrix, start = jnp.zeros((2 * num, 3, 3), x.dtype), 0
-        for part in blocks:  # each part on its own: a concatenation would copy them all
-            part = part.reshape(-1, 3, 3)
-            index = layout.blocks[start : start + part.shape[0]]
-            matrix = matrix.at[index].add(part, mode="promise_in_bounds")
-            start += part.shape[0]
-        # only the pinned vertices' rows and columns change (a block of two pinned vertices
-        # is listed twice and set twice to the same value), set in the values (an update of
-        # the blocks copied all of them)
-        touched = layout.vertex_blocks[problem.pinned].reshape(-1)
-        ends = layout.block_vertices.at[touched].get(mode="fill", fill_value=0)
-        rows, cols = proj[ends[:, 0]], proj[ends[:, 1]]
-        part = matrix.at[touched].get(mode="fill", fill_value=0.0)
-        part += jnp.swapaxes(matrix.at[touched + num].get(mode="fill", fill_value=0.0), 1, 2)
-        part = jnp.sum(rows[:, :, :, None] * part[:, None], axis=2)
-        part = jnp.sum(part[:, :, :, None] * cols[:, None], axis=2)
-        values = jnp.sum(matrix.reshape(-1)[layout.block_entries], axis=1)
-        slots = layout.block_slots.at[touched].get(mode="fill", fill_value=values.shape[0])
-        values = values.at[slots].set(part.reshape(-1, 9), mode="drop")
-        if contact is not None:
-            # the sparse pattern is the sheet's: each pair's curvature on its corners' diagonal
-            # blocks only (a principal part of a positive semi-definite block stays one)
-            def diagonal(corners, pair_blocks):
-                diag = pair_blocks[:, jnp.arange(4), jnp.arange(4)]
-                return jnp.zeros((v, 3, 3), x.dtype).at[corners].add(diag)
-
-            own = jnp.einsum("vij,vjk,vlk->vil", proj, contact(diagonal), proj)
-            values = values.at[layout.diag_blocks].add(own, mode="drop")
-        return values
-    matrix = jnp.zeros((v, v, 3, 3), x.dtype)
-    for part, e in zip(blocks, elements, strict=True):
-        matrix = matrix.at[e[:, :, None], e[:, None, :]].add(part, mode="promise_in_bounds")
-    if contact is not None:
-
-        def with_pairs(corners, pair_blocks):
-            return matrix.at[corners[:, :, None], corners[:, None, :]].add(pair_blocks)
-
-        matrix = contact(with_pairs)
-    matrix = jnp.swapaxes(matrix, 1, 2)  # (V, 3, V, 3)
-    return _project_pinned(matrix, problem.pinned, problem.projectors).reshape(-1)
-
-
-def gauged_hessian(x: Array, problem: Problem, reference: Reference, exact: Array | bool) -> Array:
-    """:func:`assemble` plus a stiffness-sized identity on the pinned (gauged-out) directions, so
-    the system stays well scaled: the matrix Newton's step and the implicit derivatives of
-    :mod:`origami_jax.design` factor."""
-    layout: HessianLayout = problem.aux
-    values = assemble(x, problem, reference, exact)
-    eye = jnp.eye(3, dtype=x.dtype)
-    return values.at[layout.diag_blocks[problem.pinned]].add(
-        _gauge_scale(problem) * (eye - problem.projectors), mode="drop"
-    )
-
-
-def _gauge_scale(problem: Problem) -> Array:
-    """The stiffness put on the pinned-out directions: the mean bar stiffness."""
-    return jnp.mean(problem.params.stiffness.axial / problem.params.rest_length)
+# the Hessian's layout, its assembly and the rigid motions have their own modules
+# (hessian_layout, assembly, reframe); the public names they took from this one are still
+# imported here (assemble, UPPER_PAIRS and rigid_free only for that: hence the noqa)
+__all__ = ["Newton", "NewtonState"]
 
 
 def energy_noise(x: Array, problem: Problem, reference: Reference, value: Array) -> Array:
@@ -703,82 +211,6 @@ def _value_and_grad(u: Array, problem: Problem, reference: Reference):
         positions(problem, u), problem.structure, problem.params, reference
     )
     return value, grad, jnp.max(jnp.abs(gauge(problem, grad)))
-
-
-def _pinned_frames(x: Array, problem: Problem) -> tuple[Array, Array, Array]:
-    """Of every third pinned vertex's triangle (a, b, c) (the gauge's pinned triangles, one
-    per piece; in a batch, padding rows after them): (K, 3, 3) frames at ``x`` (rows: along
-    ab, in the plane, normal), the (K, 3) positions of a, and (K,) which are real pinned
-    triangles (c's projector has rank 2) that ``x`` does not collapse."""
-    k = problem.pinned.shape[0] // 3
-    a, b, c = (x[problem.pinned[i : 3 * k : 3]] for i in range(3))
-    d, n = pin_axes(a, b, c)
-    frame = jnp.stack([d, jnp.cross(n, d), n], axis=1)
-    pinned = jnp.trace(problem.projectors[2 : 3 * k : 3], axis1=1, axis2=2) > 1.5
-    return frame, a, pinned & (jnp.sum(n * n, axis=-1) > 0.5)
-
-
-def _piece_index(problem: Problem, usable: Array) -> tuple[Array, Array]:
-    """(V,) each vertex's pinned triangle (clipped) and whether it has a usable one."""
-    piece = problem.aux.piece
-    k = jnp.clip(piece, 0, usable.shape[0] - 1)
-    return k, (piece >= 0) & (piece < usable.shape[0]) & usable[k]
-
-
-def reframe(x: Array, problem: Problem) -> Array:
-    """``x`` moved rigidly, piece by piece, so that each pinned triangle is back where the
-    gauge holds it (a at its start, b on the start's line ab, c in the start's plane abc):
-    the displacement ``x - start`` then satisfies the gauge exactly, so :func:`positions`
-    gives ``x`` back."""
-    frame, a, usable = _pinned_frames(x, problem)
-    frame0, a0, usable0 = _pinned_frames(problem.start, problem)
-    usable = usable & usable0  # a start that collapses a pinned triangle has no frame to keep
-    rotation = jnp.einsum("kji,kjl->kil", frame0, frame)  # frame0^T frame
-    k, ok = _piece_index(problem, usable)
-    moved = jnp.einsum("vij,vj->vi", rotation[k], x - a[k]) + a0[k]
-    return jnp.where(ok[:, None], moved, x)
-
-
-def rigid_free(w: Array, x: Array, problem: Problem) -> tuple[Array, Array]:
-    """``w`` (V, 3) less its least-squares infinitesimal rigid motion at ``x``, piece by
-    piece (the shortest displacement equivalent to ``w`` up to a rigid motion), and the
-    largest rotation removed (radians per unit of ``w``). :func:`rigid_fit` once for several
-    ``w`` at the same ``x``."""
-    return rigid_fit(x, problem)(w)
-
-
-def rigid_fit(x: Array, problem: Problem):
-    """:func:`rigid_free` at ``x`` as a function of ``w``, the pieces' centroids and inertia
-    tensors computed once.
-
-    About each piece's centroid the fit splits: the translation is the mean of ``w``, the
-    rotation ``J^-1 sum r x w`` with ``J`` the piece's inertia tensor (3 x 3, inverted in
-    closed form: LAPACK's batched kernels deadlock under several CPU devices)."""
-    _, _, usable = _pinned_frames(x, problem)
-    k, ok = _piece_index(problem, usable)
-    num = usable.shape[0]
-    weight = ok.astype(x.dtype)[:, None]
-    count = jnp.maximum(jax.ops.segment_sum(weight, k, num), 1)
-    centre = jax.ops.segment_sum(weight * x, k, num) / count
-    r = (x - centre[k]) * weight
-    outer = jax.ops.segment_sum(r[:, :, None] * r[:, None, :], k, num)
-    inertia = jnp.trace(outer, axis1=1, axis2=2)[:, None, None] * jnp.eye(3, dtype=x.dtype) - outer
-    # inverse by cofactors (the inertia tensor is symmetric): rows are cross products of columns
-    c0, c1, c2 = inertia[:, :, 0], inertia[:, :, 1], inertia[:, :, 2]
-    adjugate = jnp.stack([jnp.cross(c1, c2), jnp.cross(c2, c0), jnp.cross(c0, c1)], axis=1)
-    det = jnp.sum(c0 * jnp.cross(c1, c2), axis=-1)
-    solid = det > 1e-12 * jnp.max(jnp.abs(inertia), axis=(1, 2)) ** 3
-    inverse = (
-        jnp.where(solid[:, None, None], adjugate, 0.0) / jnp.where(solid, det, 1.0)[:, None, None]
-    )
-
-    def remove(w: Array) -> tuple[Array, Array]:
-        shift = jax.ops.segment_sum(weight * w, k, num) / count
-        omega = jnp.einsum("kij,kj->ki", inverse, jax.ops.segment_sum(jnp.cross(r, w), k, num))
-        spin = jnp.max(jnp.sqrt(jnp.sum(omega * omega, axis=-1)))
-        return w - (shift[k] + jnp.cross(omega[k], r)) * weight, spin
-
-    return remove
 
 
 def _second_order_pull(
@@ -1016,7 +448,7 @@ class Newton(Solver):
         layout: HessianLayout = problem.aux
         x = positions(problem, s.u)
         if layout.plan is not None:
-            proj = _vertex_projectors(x.shape[0], problem.pinned, problem.projectors)
+            proj = vertex_projectors(x.shape[0], problem.pinned, problem.projectors)
             factor = _block_factor(
                 layout.plan,
                 problem.structure,
@@ -1025,7 +457,7 @@ class Newton(Solver):
                 s.reference,
                 exact,
                 proj,
-                _gauge_scale(problem),
+                gauge_scale(problem),
                 _shift_of(s, exact),
             )
             return functools.partial(blocksparse.solve_factored, layout.plan, factor), [exact]
