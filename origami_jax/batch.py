@@ -59,8 +59,6 @@ import numpy as np
 
 from origami_jax.caches import LruCache
 from origami_jax.energy import (
-    NO_BARRIERS,
-    Barriers,
     FoldParams,
     Stiffness,
     needs_barriers,
@@ -79,13 +77,20 @@ from origami_jax.fold import (
     stop_reason,
 )
 from origami_jax.metrics import METRIC_NAMES
+from origami_jax.padding import (
+    Sizes,
+    bucket,
+    pad_problem,
+    problem_sizes,
+    round_up,
+    unpad_metrics,
+)
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
 from origami_jax.solvers import Solver, Status, get_solver
 from origami_jax.solvers.base import (
     Problem,
     default_max_steps,
-    rigid_gauge,
     rigid_gauges,
 )
 from origami_jax.solvers.newton import BATCH_DENSE_MAX
@@ -100,69 +105,11 @@ __all__ = [
     "SHARED_TOPOLOGY_MIN",
 ]
 
-# four padding vertices carry every padded bar and hinge: a unit bar 0-1 and a flat hinge
-_PAD_VERTICES = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
 # problems of one topology in a call from which fold_batch vmaps them unpadded, with shared
 # index arrays (below it they join the size buckets, whose compiled solves a stream reuses)
 SHARED_TOPOLOGY_MIN = 16
-
-
-class BatchSizes(NamedTuple):
-    """The array sizes of a problem: vertices, bars, driven creases, facet creases, free
-    hinges, pinned vertices and barrier triangles, and the barriers built (the static shapes
-    and settings a compiled solve depends on)."""
-
-    vertices: int
-    bars: int
-    creases: int
-    facets: int
-    free: int
-    pinned: int
-    triangles: int = 0
-    barriers: Barriers = NO_BARRIERS
-
-
-def _pow2(n: int) -> int:
-    return 0 if n <= 0 else 1 << (int(n) - 1).bit_length()
-
-
-def bucket(sizes: BatchSizes) -> BatchSizes:
-    """The padded sizes of a problem: each count rounded up to a power of two, with room for
-    the four padding vertices and one padding bar (which padded hinges point to), and at least
-    twice the padded vertex count of bars and as many creases and facet creases as vertices.
-
-    The floors tie the element counts to the vertex bucket, so patterns of one size share a
-    compiled solve whatever their mix of creases and facets (a stream of 100 random Miura-ori
-    and waterbomb sheets makes 7 buckets instead of 17); dense Newton's cost is set by the
-    vertex count, and the extra padded elements cost little."""
-    vertices = _pow2(sizes.vertices + len(_PAD_VERTICES))
-    return BatchSizes(
-        vertices=vertices,
-        bars=max(_pow2(sizes.bars + 1), 2 * vertices),
-        creases=max(_pow2(sizes.creases), vertices),
-        facets=max(_pow2(sizes.facets), vertices),
-        free=_pow2(sizes.free),
-        pinned=_pow2(sizes.pinned),
-        triangles=max(_pow2(sizes.triangles), 2 * vertices) if sizes.triangles else 0,
-        barriers=sizes.barriers,
-    )
-
-
-def problem_sizes(pattern: CreasePattern) -> BatchSizes:
-    """The unpadded :class:`BatchSizes` of a pattern's folding problem."""
-    mesh = pattern.mesh
-    s = structure_arrays(mesh, free_barriers=False)
-    pieces = len(rigid_gauge(mesh, mesh.vertices)[0])
-    return BatchSizes(
-        mesh.num_vertices,
-        len(s.bars),
-        s.num_creases,
-        s.num_facets,
-        len(s.free),
-        pieces,
-        len(s.triangles),
-        s.barriers,
-    )
+# the sizes of a problem (its padding's home: origami_jax.padding)
+BatchSizes = Sizes
 
 
 class _Group(NamedTuple):
@@ -188,87 +135,9 @@ class _Member(NamedTuple):
     extent: float = 0.0  # :func:`_fold_extents`
 
 
-def _pad_rows(a: np.ndarray, n: int, fill) -> np.ndarray:
-    """``a`` with rows appended up to ``n``, each equal to ``fill``."""
-    a = np.asarray(a)
-    extra = n - a.shape[0]
-    if extra <= 0:
-        return a
-    pad = np.broadcast_to(np.asarray(fill, a.dtype), (extra, *a.shape[1:]))
-    return np.concatenate([a, pad])
-
-
-def _per_element(k: Stiffness, sizes: BatchSizes) -> Stiffness:
-    """Stiffnesses as one value per element (scalars broadcast), so problems stack."""
-    return Stiffness(
-        axial=np.broadcast_to(k.axial, (sizes.bars,)),
-        facet=np.broadcast_to(k.facet, (sizes.facets,)),
-        crease=np.broadcast_to(k.crease, (sizes.creases,)),
-    )
-
-
-def _padded(member: _Member, to: BatchSizes, solver: Solver) -> Problem:
-    """The member's problem padded to the sizes ``to`` (NumPy leaves)."""
-    p, s = member.problem, member.sizes
-    st, prm = p.structure, p.params
-    v = s.vertices
-    pad_bar = [v, v + 1]
-    pad_hinge = [v, v + 1, v + 2, v + 3]
-    nc = st.num_creases
-    hinges = np.concatenate(
-        [
-            _pad_rows(st.hinges[:nc], to.creases, pad_hinge),
-            _pad_rows(st.hinges[nc:], to.facets, pad_hinge),
-        ]
-    ).astype(np.int32)
-    hinge_bars = np.concatenate(
-        [
-            _pad_rows(st.hinge_bars[:nc], to.creases, s.bars),
-            _pad_rows(st.hinge_bars[nc:], to.facets, s.bars),
-        ]
-    ).astype(np.int32)
-    structure = replace(
-        st,
-        bars=_pad_rows(st.bars, to.bars, pad_bar).astype(np.int32),
-        hinges=hinges,
-        hinge_bars=hinge_bars,
-        free=_pad_rows(st.free, to.free, pad_hinge).astype(np.int32),
-        free_bars=_pad_rows(st.free_bars, to.free, s.bars).astype(np.int32),
-        # a padded triangle lies on three padding vertices, its sides the padding bar (of zero
-        # stiffness: no barrier weight)
-        triangles=_pad_rows(st.triangles, to.triangles, pad_hinge[:3]).astype(np.int32),
-        triangle_bars=_pad_rows(st.triangle_bars, to.triangles, [s.bars] * 3).astype(np.int32),
-        num_creases=to.creases,
-    )
-    k = _per_element(prm.stiffness, s)
-    stiffness = Stiffness(
-        axial=_pad_rows(k.axial, to.bars, 0.0),
-        facet=_pad_rows(k.facet, to.facets, 0.0),
-        crease=_pad_rows(k.crease, to.creases, 0.0),
-    )
-    params = FoldParams(
-        target=_pad_rows(prm.target, to.creases, 0.0),
-        percent=prm.percent,
-        rest_length=_pad_rows(prm.rest_length, to.bars, 1.0),
-        stiffness=stiffness,
-    )
-    start = np.concatenate([p.start, _pad_rows(_PAD_VERTICES, to.vertices - v, _PAD_VERTICES[0])])
-    # every padding vertex is pinned in place (its rows repeat the first one): the gauge's
-    # pins, then the padding vertices, then fill, to a length that fits every member of a bucket
-    pinned = np.concatenate([p.pinned, np.arange(v, to.vertices)])
-    projectors = np.concatenate([p.projectors, np.zeros((to.vertices - v, 3, 3))])
-    length = to.pinned + to.vertices
-    pinned = _pad_rows(pinned, length, v).astype(np.int32)
-    projectors = _pad_rows(projectors, length, np.zeros((3, 3)))
-    problem = replace(
-        p,
-        structure=structure,
-        params=params,
-        start=start,
-        pinned=pinned,
-        projectors=projectors,
-    )
-    return solver.prepare_batch(problem, member.pattern.mesh)
+def _padded(member: _Member, to: Sizes, solver: Solver) -> Problem:
+    """The member's problem padded to the sizes ``to`` (NumPy leaves), prepared."""
+    return solver.prepare_batch(pad_problem(member.problem, member.sizes, to), member.pattern.mesh)
 
 
 def _start(index: int, pattern: CreasePattern, start) -> np.ndarray:
@@ -403,7 +272,7 @@ def _chunk_size(requested: int | None, n: int, solver: Solver, to: BatchSizes, d
             # keep the slots' working memory (Newton: dense matrices) near 256 MB in all
             fits = 2 ** int(np.log2(max(2**28 // per_member, 1)))
             requested = max(1, min(requested, fits))
-    size = min(int(requested), _pow2(n))
+    size = min(int(requested), round_up(n))
     return -(-size // d) * d
 
 
@@ -1090,10 +959,7 @@ def _result(member, to, r, out, samples, max_iter, solver, dtype, wall, compile_
     iterations = int(out.iteration[r])
     if status == Status.RUNNING:
         status = Status.MAX_ITER if iterations >= max_iter else Status.TIME_LIMIT
-    metrics = {k: float(out.metrics[k][r]) for k in METRIC_NAMES}
-    # padding adds exact zeros: means over the real elements only
-    metrics["strain_mean"] *= to.bars / s.bars
-    metrics["fold_angle_error_mean"] *= to.creases / s.creases if s.creases else 0.0
+    metrics = unpad_metrics({k: float(out.metrics[k][r]) for k in METRIC_NAMES}, s, to)
     entry = {k: float(out.entry[k][r]) for k in _SAMPLED} | {"iteration": 0, "wall_time": 0.0}
     last = {k: metrics[k] for k in _SAMPLED} | {"iteration": iterations, "wall_time": wall}
     rows = [entry] + [x for x in samples if 0 < x["iteration"] < iterations] + [last]

@@ -4,6 +4,9 @@ The solve runs compiled, in chunks of iterations (each chunk one ``lax.while_loo
 chunks the host records a ``(wall_time, error)`` sample, updates the progress bar and checks the
 iteration limit. Compiled functions are cached per (solver, array shapes and dtypes), so folding
 another pattern of the same sizes, or the same pattern with other parameters, compiles nothing.
+A problem solved in one compiled program (not Newton's sparse solves, not self-contact) is
+padded to a size bucket first (:func:`prepared`, :mod:`origami_jax.padding`: at most 19 % more
+vertices, inert padding), so patterns of similar size share their compiled solve too.
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ from origami_jax.metrics import (
     position_metrics,
     shape_error,
 )
+from origami_jax.padding import Sizes, bucket, pad_problem, sizes_of, unpad_metrics
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
 from origami_jax.solvers import Solver, Status, get_solver
@@ -316,6 +320,56 @@ def compiled(solver: Solver, problem, num_edges: int):
     compile_time = time.perf_counter() - t0
     _CACHE[cache_key] = (start_c, advance_c)
     return (start_c, advance_c), compile_time
+
+
+# a single fold's problem is padded to a size bucket (origami_jax.padding) of this many steps
+# per doubling of its counts (at most 19 % more vertices): patterns of similar size then share
+# one compiled solve, in the process and in the cache on disk (0: no padding)
+BUCKETS_PER_OCTAVE = 4
+
+
+class Padding(NamedTuple):
+    """A padded problem's sizes (``sizes``) and those of its bucket (``to``)."""
+
+    sizes: Sizes
+    to: Sizes
+
+    def metrics(self, m: dict) -> dict:
+        """The padded solve's metrics (host values) for the real problem."""
+        return unpad_metrics(m, self.sizes, self.to)
+
+    def positions(self, x: np.ndarray) -> np.ndarray:
+        """The real vertices' rows of padded positions ``x`` (host values)."""
+        return x[: self.sizes.vertices]
+
+    def edges(self, num_edges: int) -> int:
+        """The edge count a padded solve reports fold angles for (one per padded bar: patterns
+        of one bucket share it; the real edges come first)."""
+        return max(num_edges, self.to.bars)
+
+
+def prepared(solver: Solver, problem, mesh, dtype, pad: bool = True):
+    """``(problem, padding)``: ``problem`` prepared for ``solver``, padded to its size bucket
+    (:data:`BUCKETS_PER_OCTAVE`) and prepared as ``fold_batch`` prepares its members where
+    ``pad`` and where the solver solves it in one compiled program (no host callbacks: not
+    Newton's sparse solves) without contact; ``padding`` is then its :class:`Padding`, else
+    ``None``. The padding is inert (:mod:`origami_jax.padding`)."""
+    plain = solver.prepare(problem, mesh)
+    if not (pad and BUCKETS_PER_OCTAVE > 0) or problem.structure.contact is not None:
+        return plain, None
+    if solver.host_callbacks(plain):
+        return plain, None
+    sizes = sizes_of(problem)
+    to = bucket(sizes, BUCKETS_PER_OCTAVE)
+    try:
+        solver.check_batch(to.vertices)
+    except ValueError:  # too large for the solver's batched (dense) solve
+        return plain, None
+    padded = pad_problem(problem, sizes, to)
+    padded = jax.tree.map(
+        lambda a: jnp.asarray(a, dtype if np.asarray(a).dtype.kind == "f" else None), padded
+    )
+    return solver.prepare_batch(padded, mesh), Padding(sizes, to)
 
 
 CHUNK_SECONDS = 0.1  # how long a chunk of compiled iterations aims to run
@@ -667,13 +721,19 @@ def _fold_once(
             on_chunk,
         )
     else:
-        problem = solver_obj.prepare(make_problem(mesh, structure, params, start, tol), mesh)
-        (start_c, advance_c), compile_time = compiled(solver_obj, problem, mesh.num_edges)
+        problem, padding = prepared(
+            solver_obj, make_problem(mesh, structure, params, start, tol), mesh, dtype
+        )
+        edges = mesh.num_edges if padding is None else padding.edges(mesh.num_edges)
+        (start_c, advance_c), compile_time = compiled(solver_obj, problem, edges)
         t0 = time.perf_counter()
         state, m, x, angles, samples, out_of_time = drive(
             solver_obj, start_c, advance_c, problem, max_iter, max_time, record_every, on_chunk
         )
-        x, angles = jax.device_get((x, angles))
+        m, x, angles = jax.device_get((m, x, angles))
+        angles = angles[: mesh.num_edges]
+        if padding is not None:
+            m, x = padding.metrics(m), padding.positions(x)
         _check_room(state, x, structure)
         solved = _Solved(
             state,
@@ -927,7 +987,6 @@ def _solve_path(
     dtype = params.rest_length.dtype
     full = params.percent
     x = np.asarray(mesh.vertices if start is None else start, np.float64)
-    reference = _initial_reference(jnp.asarray(x, dtype), structure, params)
 
     k = params.stiffness
     crease = jnp.mean(k.crease)
@@ -951,14 +1010,18 @@ def _solve_path(
             gap_scale=jnp.asarray(wide**soft * user_gap, dtype),
         )
         problem = make_problem(mesh, structure, at, x, tol, reference=reference)
-        return solver.prepare(problem, mesh)
+        return prepared(solver, problem, mesh, dtype)
 
-    problem = problem_at(1.0, x, reference)
-    (start_c, advance_c), compile_time = compiled(solver, problem, mesh.num_edges)
+    problem, padding = problem_at(1.0, x, None)
+    # the start's reference, of the problem as solved (padded: compiled once per bucket)
+    reference = _initial_reference(problem.start, problem.structure, problem.params)
+    problem = replace(problem, reference=reference)
+    edges = mesh.num_edges if padding is None else padding.edges(mesh.num_edges)
+    (start_c, advance_c), compile_time = compiled(solver, problem, edges)
     t0 = time.perf_counter()
     first, m, _, angles = jax.device_get(start_c(problem))
     grad_ref = float(first.grad_max0)
-    frames = [Frame(0.0, x, np.asarray(angles, np.float64))]
+    frames = [Frame(0.0, x, np.asarray(angles[: mesh.num_edges], np.float64))]
     samples = [_sample(first, m, 0.0)]  # the start, fully driven, as a direct solve's
     watched = np.asarray(structure.hinge_bars)[: structure.num_creases + structure.num_facets]
     done, step, iterations, calm = 0.0, PATH_FIRST_STEP, 0, True
@@ -978,7 +1041,7 @@ def _solve_path(
             solver,
             start_c,
             advance_c,
-            problem_at(fraction, x, reference),
+            problem_at(fraction, x, reference)[0],
             budget,
             None if max_time is None else max(max_time - spent, 0.0),
             record_every,
@@ -986,7 +1049,10 @@ def _solve_path(
             retol=retol,
             pace=pace,
         )
-        xk, angles_k = jax.device_get((xk, angles_k))
+        m, xk, angles_k = jax.device_get((m, xk, angles_k))
+        angles_k = angles_k[: mesh.num_edges]
+        if padding is not None:
+            m, xk = padding.metrics(m), padding.positions(xk)
         _check_room(state, xk, structure)
         steps = int(state.iteration)
         for sample in chunk[1:]:  # each step's start is the last one's end

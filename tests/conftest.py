@@ -19,6 +19,11 @@ os.environ["XLA_FLAGS"] = (
 os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", tempfile.mkdtemp(prefix="origami-jax-jit-"))
 os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.5")
 
+# One BLAS thread per worker: pytest-xdist runs a worker per core, and OpenBLAS's threads spin
+# while they wait, so two workers' dense Cholesky factorizations on two cores ran 100x slower
+# (a waterbomb's Newton iteration: 4 ms alone, 690 ms beside another busy process).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import jax  # noqa: E402
 import pytest  # noqa: E402
 
