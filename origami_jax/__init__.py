@@ -41,6 +41,7 @@ if TYPE_CHECKING:  # pragma: no cover  (what the lazy names are, for type checke
         PatternWarning,
     )
     from origami_jax.tuning import tune_process  # noqa: F401
+    from origami_jax.warmup import warmup  # noqa: F401
 
 # public name -> the module that defines it (None: the name is a submodule)
 _LAZY: dict[str, str | None] = {
@@ -66,6 +67,7 @@ _LAZY: dict[str, str | None] = {
     "clear_caches": "origami_jax.caches",
     "use_compilation_cache": "origami_jax.caches",
     "tune_process": "origami_jax.tuning",
+    "warmup": "origami_jax.warmup",
 }
 __all__ = list(_LAZY)
 

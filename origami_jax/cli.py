@@ -2,7 +2,9 @@
 ``origami-jax info INPUT`` (counts, pieces, holes, reading warnings, vertices that are not
 flat-foldable; see :mod:`origami_jax.info`) and ``origami-jax render INPUT|--example NAME --out
 fold.png|fold.html|fold.gif|fold.mp4`` (a picture, an interactive page or an animation of the
-fold; see :mod:`origami_jax.viz`, needs ``pip install "origami-jax[viz]"``).
+fold; see :mod:`origami_jax.viz`, needs ``pip install "origami-jax[viz]"``), and ``origami-jax
+warmup [--max-vertices N]`` (compiles the common size buckets' solves into the cache ahead of
+time; see :mod:`origami_jax.warmup`).
 
 Arguments are checked when parsed (:func:`build_parser`, which imports neither JAX nor the
 package's modules, so ``--help`` and ``--version`` answer at once; each command imports what it
@@ -180,6 +182,26 @@ def build_parser() -> argparse.ArgumentParser:
         default=120,
         help="PNG / animation resolution (120)",
     )
+    w = sub.add_parser(
+        "warmup",
+        help="compile the solves of the common size buckets ahead of time, into the cache",
+    )
+    w.add_argument(
+        "--max-vertices",
+        type=_number(int, "4 or more", 4),
+        default=200,
+        help="the largest sheet whose bucket is compiled (default: 200, Newton's dense limit)",
+    )
+    w.add_argument("--solver", default="newton", help="newton (default), lbfgs or dynamics")
+    w.add_argument("--float32", action="store_true", help="compile for float32 (default float64)")
+    w.add_argument(
+        "--cache",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="keep what it compiles in the per-user persistent cache (default: on; without it "
+        "the work is lost when the command ends)",
+    )
+    w.add_argument("--quiet", action="store_true", help="no line per bucket")
     return parser
 
 
@@ -304,6 +326,27 @@ def _set_up_process(args: argparse.Namespace) -> None:
         matplotlib.use("Agg")  # no window
 
 
+def _warmup(args: argparse.Namespace) -> int:
+    """``origami-jax warmup``: :func:`origami_jax.warmup.warmup`, a line per bucket."""
+    import jax.numpy as jnp
+
+    from origami_jax.warmup import warmup
+
+    try:
+        done = warmup(
+            args.max_vertices,
+            dtype=jnp.float32 if args.float32 else jnp.float64,
+            solver=args.solver,
+            progress=not args.quiet,
+        )
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    fresh = sum(1 for seconds in done.values() if seconds > 0)
+    print(f"{len(done)} solves ready ({fresh} compiled now)")
+    return 0
+
+
 def console_main(argv: Sequence[str] | None = None) -> int:
     """The ``origami-jax`` command (``[project.scripts]``, ``python -m origami_jax``): sets up
     the process (see the module docstring), then runs :func:`main`'s command."""
@@ -314,14 +357,17 @@ def console_main(argv: Sequence[str] | None = None) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run one command (``fold``, ``info`` or ``render``, with its arguments ``argv``; default
-    ``sys.argv[1:]``) in this process, changing none of its settings; returns the exit code."""
+    """Run one command (``fold``, ``info``, ``render`` or ``warmup``, with its arguments
+    ``argv``; default ``sys.argv[1:]``) in this process, changing none of its settings; returns
+    the exit code."""
     return _run(build_parser().parse_args(argv))
 
 
 def _run(args: argparse.Namespace) -> int:
     if args.command == "info":
         return _info(args.input)
+    if args.command == "warmup":
+        return _warmup(args)
     from origami_jax import PatternError, io
     from origami_jax.fold import fold
 

@@ -11,8 +11,11 @@ vertices, inert padding), so patterns of similar size share their compiled solve
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import functools
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
@@ -348,19 +351,38 @@ class Padding(NamedTuple):
         return max(num_edges, self.to.bars)
 
 
-def prepared(solver: Solver, problem, mesh, dtype, pad: bool = True):
+# the least sizes a padded problem gets (origami_jax.warmup: a small pattern padded to a larger
+# bucket compiles that bucket's solve)
+_AT_LEAST: contextvars.ContextVar[Sizes | None] = contextvars.ContextVar("at_least", default=None)
+
+
+@contextlib.contextmanager
+def padded_at_least(sizes: Sizes) -> Iterator[None]:
+    """Within this context, :func:`fold` pads every problem it pads to at least ``sizes`` (a
+    bucket's sizes, see :func:`origami_jax.padding.bucket`)."""
+    token = _AT_LEAST.set(sizes)
+    try:
+        yield
+    finally:
+        _AT_LEAST.reset(token)
+
+
+def prepared(solver: Solver, problem, mesh, dtype):
     """``(problem, padding)``: ``problem`` prepared for ``solver``, padded to its size bucket
     (:data:`BUCKETS_PER_OCTAVE`) and prepared as ``fold_batch`` prepares its members where
-    ``pad`` and where the solver solves it in one compiled program (no host callbacks: not
-    Newton's sparse solves) without contact; ``padding`` is then its :class:`Padding`, else
-    ``None``. The padding is inert (:mod:`origami_jax.padding`)."""
+    the solver solves it in one compiled program (no host callbacks: not Newton's sparse
+    solves) without contact; ``padding`` is then its :class:`Padding`, else ``None``. The
+    padding is inert (:mod:`origami_jax.padding`)."""
     plain = solver.prepare(problem, mesh)
-    if not (pad and BUCKETS_PER_OCTAVE > 0) or problem.structure.contact is not None:
+    if BUCKETS_PER_OCTAVE <= 0 or problem.structure.contact is not None:
         return plain, None
     if solver.host_callbacks(plain):
         return plain, None
     sizes = sizes_of(problem)
     to = bucket(sizes, BUCKETS_PER_OCTAVE)
+    least = _AT_LEAST.get()
+    if least is not None:
+        to = to._replace(**{k: max(getattr(to, k), getattr(least, k)) for k in Sizes._fields[:7]})
     try:
         solver.check_batch(to.vertices)
     except ValueError:  # too large for the solver's batched (dense) solve

@@ -59,3 +59,22 @@ def test_patterns_of_one_bucket_share_a_compiled_solve():
     second = fold(patterns.waterbomb(1, 1))
     assert first.converged and second.converged
     assert second.compile_time == 0.0
+
+
+def test_warmup_compiles_what_a_new_pattern_of_its_bucket_needs():
+    """After warmup of the 13-vertex bucket (direct and along the path), a Miura-ori 2 x 2
+    (direct) and a degree-4 vertex folded fully (the path from flat) compile nothing."""
+    from origami_jax import clear_caches, warmup
+    from origami_jax.warmup import vertex_buckets
+
+    assert vertex_buckets(9) == [8, 10, 11, 13]
+    clear_caches()
+    done = warmup(buckets=[13])
+    assert set(done) == {(13, "continuation"), (13, "direct")}
+    direct = fold(patterns.miura_ori(2, 2))
+    path = fold(patterns.degree4_vertex(2.5, 0.3, 3.1))
+    assert direct.path == "direct" and path.path == "continuation"
+    assert direct.compile_time == 0.0 and path.compile_time == 0.0
+    assert warmup(buckets=[13]) == {(13, "continuation"): 0.0, (13, "direct"): 0.0}
+    with pytest.raises(ValueError, match="at least 8"):
+        warmup(buckets=[5])

@@ -220,3 +220,11 @@ def test_contact_option_parses_to_fold_s_argument():
     assert parse(["fold"]).contact is False
     assert parse(["fold", "--contact"]).contact is True
     assert parse(["render", "--contact", "0.01"]).contact == 0.01
+
+
+def test_warmup_compiles_the_smallest_bucket(capsys):
+    assert main(["warmup", "--max-vertices", "4", "--quiet"]) == 0
+    assert capsys.readouterr().out.strip().startswith("2 solves ready")
+    with pytest.raises(SystemExit):
+        main(["warmup", "--max-vertices", "3"])
+    assert "4 or more" in capsys.readouterr().err

@@ -1,0 +1,90 @@
+"""Compile the common size buckets ahead of time: :func:`warmup` (``origami-jax warmup``).
+
+:func:`~origami_jax.fold.fold` pads a problem to a size bucket (:mod:`origami_jax.padding`), so
+one compiled solve serves every pattern of that bucket. :func:`warmup` compiles those solves
+before any pattern needs them, by folding a single crease padded up to each bucket: once with
+a full fold (the path from flat, with the barriers: what real crease patterns mostly take) and
+once partly folded (a direct solve, without barriers: rigid-foldable tessellations). With the
+persistent cache on (:func:`origami_jax.caches.use_compilation_cache`, on by default in the
+command line) that work is kept for every later process on this machine.
+
+A bucket is named by its padded vertex count; the element counts are the bucket's least
+(:func:`~origami_jax.padding.bucket`'s floors), which a sheet of that many vertices fits unless
+it has more creases or facet creases than vertices, more than two bars per vertex, or free
+hinges. Those, Newton's sparse solves (above its ``dense_max``, 200 vertices) and folds with
+self-contact still compile on first use.
+
+Example:
+  >>> import origami_jax as oj
+  >>> oj.use_compilation_cache()          # doctest: +SKIP
+  >>> oj.warmup(max_vertices=60)          # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from origami_jax.energy import NO_BARRIERS, Barriers
+from origami_jax.fold import BUCKETS_PER_OCTAVE, fold, padded_at_least
+from origami_jax.padding import PAD_VERTICES, Sizes, round_up
+from origami_jax.patterns import single_crease
+
+__all__ = ["warmup", "vertex_buckets"]
+
+PATHS = ("continuation", "direct")
+
+
+def vertex_buckets(max_vertices: int) -> list[int]:
+    """The padded vertex counts of the buckets that sheets of 4 to ``max_vertices`` vertices
+    fall in (each with room for the padding's four vertices)."""
+    top = round_up(int(max_vertices) + len(PAD_VERTICES), BUCKETS_PER_OCTAVE)
+    first = round_up(2 * len(PAD_VERTICES), BUCKETS_PER_OCTAVE)
+    out = {round_up(n, BUCKETS_PER_OCTAVE) for n in range(first, top + 1)}
+    return sorted(out)
+
+
+def warmup(
+    max_vertices: int = 200,
+    dtype=None,
+    solver: str = "newton",
+    paths: Sequence[str] = PATHS,
+    buckets: Sequence[int] | None = None,
+    progress: bool = False,
+) -> dict[tuple[int, str], float]:
+    """Compile :func:`~origami_jax.fold.fold`'s solves for the size buckets of sheets up to
+    ``max_vertices`` vertices (or the padded vertex counts ``buckets``), for ``paths``
+    (``"continuation"``: full folds along the path from flat, with barriers; ``"direct"``:
+    direct solves without barriers), in ``dtype`` (default JAX's default float) with
+    ``solver``. Returns the compile time (seconds; 0 where it was compiled already) of each
+    (bucket, path). ``progress``: a line per bucket on stderr."""
+    if BUCKETS_PER_OCTAVE <= 0:
+        raise ValueError("warmup: fold pads to no buckets (fold.BUCKETS_PER_OCTAVE is 0)")
+    for path in paths:
+        if path not in PATHS:
+            raise ValueError(f"warmup: a path is 'continuation' or 'direct', got {path!r}")
+    if buckets is None:
+        buckets = vertex_buckets(max_vertices)
+    out = {}
+    for n in buckets:
+        if int(n) < 2 * len(PAD_VERTICES):
+            raise ValueError(f"warmup: a bucket has at least 8 vertices, got {n}")
+        for path in paths:
+            full = path == "continuation"
+            barriers = Barriers() if full else NO_BARRIERS
+            least = Sizes(n, 2 * n, n, n, 0, 3, 2 * n if full else 0, barriers)
+            crease = single_crease(fold_angle=np.pi if full else 1.0)
+            t = time.perf_counter()
+            with padded_at_least(least):
+                result = fold(crease, solver=solver, dtype=dtype, path=path, barriers=full)
+            out[(int(n), path)] = result.compile_time
+            if progress:
+                print(
+                    f"bucket {n:4d} vertices, {path:12s}: {time.perf_counter() - t:6.1f} s",
+                    file=sys.stderr,
+                    flush=True,
+                )
+    return out
