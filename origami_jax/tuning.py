@@ -26,6 +26,15 @@ and the command line (``origami-jax``) and the benchmarks call it:
   Newton fold with PARDISO takes about a tenth less time with it (see
   docs/design-notes/newton.md). Or set ``KMP_BLOCKTIME=0`` before Python starts.
 
+* **BLAS threads** (:func:`limit_blas_threads`, ``blas_threads``): JAX's CPU LAPACK (the dense
+  Cholesky of Newton's dense solves, below 200 vertices, and of ``fold_batch``) calls the
+  OpenBLAS that scipy bundles, whose threads spin while they wait. Beside another busy process
+  on the same cores that turns a factorization many times slower: a waterbomb's Newton
+  iteration took 4 ms alone and 690 ms beside one other busy process; with one BLAS thread, 6 ms
+  beside it. Opted in, the OpenBLAS copies loaded in the process (scipy's and numpy's) run one
+  thread each (unless ``OPENBLAS_NUM_THREADS`` is set). Or set ``OPENBLAS_NUM_THREADS=1``
+  before Python starts.
+
 The command line also turns on JAX's float64 (``jax_enable_x64``) and, with ``--cache``, its
 persistent compilation cache, and prints warnings on one line: in its console entry point
 (:func:`origami_jax.cli.console_main`), not in :func:`origami_jax.cli.main`.
@@ -33,28 +42,79 @@ persistent compilation cache, and prints warnings on one line: in its console en
 Example:
   >>> import origami_jax
   >>> sorted(origami_jax.tune_process())  # doctest: +SKIP
-  ['malloc', 'mkl_blocktime', 'openblas_kernels']
+  ['blas_threads', 'malloc', 'mkl_blocktime', 'openblas_kernels']
 """
 
 from __future__ import annotations
 
+import ctypes
+import os
+
 from origami_jax.memory import keep_freed_memory
 from origami_jax.solvers import hostsparse
 
-__all__ = ["tune_process"]
+__all__ = ["tune_process", "limit_blas_threads"]
+
+# the OpenBLAS entry points that set its thread count, by the prefixes and suffixes of the
+# copies numpy and scipy bundle, and of a system OpenBLAS
+_SET_THREADS = (
+    "scipy_openblas_set_num_threads",
+    "scipy_openblas_set_num_threads64_",
+    "openblas_set_num_threads",
+    "openblas_set_num_threads64_",
+)
+
+
+def _loaded_libraries() -> list[str]:
+    """The shared libraries mapped into this process (Linux; elsewhere none are found)."""
+    try:
+        with open("/proc/self/maps", encoding="utf-8") as f:
+            return sorted({line.split()[-1] for line in f if ".so" in line.split()[-1]})
+    except OSError:
+        return []
+
+
+def limit_blas_threads(threads: int = 1) -> bool:
+    """Run every OpenBLAS loaded in this process (scipy's, which JAX's CPU LAPACK calls, and
+    numpy's) on ``threads`` threads, unless ``OPENBLAS_NUM_THREADS`` is set. Process-wide (see
+    the module docstring). Returns whether any was set."""
+    if threads < 1:
+        raise ValueError(f"limit_blas_threads: threads must be >= 1, got {threads}")
+    if "OPENBLAS_NUM_THREADS" in os.environ:
+        return False
+    import numpy  # noqa: F401  (loads numpy's OpenBLAS)
+    import scipy.linalg.cython_lapack  # noqa: F401  (loads scipy's, the one JAX calls)
+
+    done = False
+    for path in _loaded_libraries():
+        if "openblas" not in os.path.basename(path).lower():
+            continue
+        lib = ctypes.CDLL(path)
+        for symbol in _SET_THREADS:
+            setter = getattr(lib, symbol, None)
+            if setter is not None:
+                setter(ctypes.c_int(int(threads)))
+                done = True
+                break
+    return done
 
 
 def tune_process(
-    malloc: bool = True, openblas_kernels: bool = True, mkl_blocktime: bool = True
+    malloc: bool = True,
+    openblas_kernels: bool = True,
+    mkl_blocktime: bool = True,
+    blas_threads: int | None = 1,
 ) -> dict[str, bool]:
     """Opt in to the process-wide settings of this module's docstring (``False``: leave that one
     as it is). Call it early: the OpenBLAS kernels can only be named before cvxopt is first
-    imported. Returns, for each setting, whether it was asked for and is in effect (``False``
-    where one cannot take: not glibc, cvxopt loaded earlier, a variable of yours set, ...)."""
+    imported. ``blas_threads``: the OpenBLAS thread count (``None``: left alone). Returns, for
+    each setting, whether it was asked for and is in effect (``False`` where one cannot take:
+    not glibc, cvxopt loaded earlier, a variable of yours set, ...)."""
     took = {"malloc": keep_freed_memory() if malloc else False}
     took.update(hostsparse.tune(openblas_kernels=openblas_kernels, mkl_blocktime=mkl_blocktime))
     if not openblas_kernels:
         took["openblas_kernels"] = False
     if not mkl_blocktime:
         took["mkl_blocktime"] = False
+    took["blas_threads"] = limit_blas_threads(blas_threads) if blas_threads else False
     return took

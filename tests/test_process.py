@@ -125,3 +125,46 @@ def test_mkl_threads_spin_as_usual_unless_tuned():
         pytest.skip("needs MKL's PARDISO and Intel's OpenMP runtime")
     assert plain[0] == "True" and int(plain[1]) > 0
     assert _python(BLOCKTIME_SCRIPT, "tuned") == ["True", "True", "0"]
+
+
+# JAX's CPU LAPACK calls scipy's OpenBLAS: its thread count before and after tuning
+BLAS_SCRIPT = textwrap.dedent(
+    """
+    import ctypes, os, sys
+    import scipy.linalg.cython_lapack
+    import origami_jax
+
+    def counts():
+        with open("/proc/self/maps") as f:
+            paths = {line.split()[-1] for line in f if "openblas" in line.lower()}
+        out = []
+        for path in sorted(p for p in paths if ".so" in p):
+            lib = ctypes.CDLL(path)
+            get = getattr(lib, "scipy_openblas_get_num_threads", None) or getattr(
+                lib, "scipy_openblas_get_num_threads64_", None)
+            if get is not None:
+                out.append(get())
+        return out
+
+    if not os.path.exists("/proc/self/maps"):
+        print("skip")
+        sys.exit()
+    before = counts()
+    print(before)
+    if sys.argv[1] == "tuned":
+        print(origami_jax.tune_process(malloc=False, openblas_kernels=False, mkl_blocktime=False))
+    print(counts())
+    """
+)
+
+
+def test_blas_threads_are_left_alone_unless_tuned():
+    """Importing the package leaves OpenBLAS's thread count as it found it; ``tune_process()``
+    sets every loaded copy (scipy's, which JAX's LAPACK calls, among them) to one thread."""
+    plain = _python(BLAS_SCRIPT, "plain")
+    if plain[0] == "skip":
+        pytest.skip("needs /proc/self/maps (Linux)")
+    assert plain[0] == plain[1] and plain[0] != "[]"
+    tuned = _python(BLAS_SCRIPT, "tuned")
+    assert "'blas_threads': True" in tuned[1]
+    assert set(eval(tuned[2])) == {1}
