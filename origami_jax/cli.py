@@ -115,13 +115,16 @@ def _scene_arguments(p: argparse.ArgumentParser, out_help: str) -> None:
         help="self-contact: faces kept apart by DHAT, pattern units (default without a value: "
         "1e-3 of the sheet's diameter); Newton only",
     )
-    p.add_argument(
-        "--cache",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="keep compiled code in the per-user persistent cache, so the next run of a pattern "
-        "of the same shapes starts sooner (default: on; --no-cache: off)",
+    _cache_argument(
+        p,
+        "keep compiled code in the per-user persistent cache, so the next run of a pattern of "
+        "the same shapes starts sooner (default: on; --no-cache: off)",
     )
+
+
+def _cache_argument(p: argparse.ArgumentParser, what: str) -> None:
+    """``--cache`` / ``--no-cache`` (on by default): the persistent compilation cache."""
+    p.add_argument("--cache", action=argparse.BooleanOptionalAction, default=True, help=what)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -194,12 +197,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     w.add_argument("--solver", default="newton", help="newton (default), lbfgs or dynamics")
     w.add_argument("--float32", action="store_true", help="compile for float32 (default float64)")
-    w.add_argument(
-        "--cache",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="keep what it compiles in the per-user persistent cache (default: on; without it "
-        "the work is lost when the command ends)",
+    _cache_argument(
+        w,
+        "keep what it compiles in the per-user persistent cache (default: on; without it the "
+        "work is lost when the command ends)",
     )
     w.add_argument("--quiet", action="store_true", help="no line per bucket")
     return parser
