@@ -9,7 +9,8 @@ structure, shapes and dtypes, the package's source, JAX's version and the backen
 process deserializes it and compiles it, which the persistent cache answers.
 
 A program that cannot be exported (one with host callbacks: sparse Newton's linear solves) is
-compiled as usual. A stored file that cannot be read is replaced.
+compiled as usual; JAX's persistent cache does not keep it either, so it compiles in every new
+process. A stored file that cannot be read is replaced.
 """
 
 from __future__ import annotations
