@@ -14,7 +14,9 @@ it prints its phase times as one JSON line. The parent times the whole process f
 temporary folder); ``warm``, the same folder once the cold pass has folded every file;
 ``command``, ``python -m origami_jax fold FILE --out X.fold --quiet`` on the warm cache, its
 total time only (what a user waits for). Warm and command need the cold pass's folder: the cold
-pass runs whenever they are asked for.
+pass runs whenever they are asked for. ``warmed``: a new cache folder filled by
+``origami-jax warmup`` alone (its time is reported), then each file as in the warm pass: the
+first fold of a pattern never folded before, on an installation that ran the warmup.
 
 Writes ``latency_<pass>.csv``, ``latency_results.md`` and ``latency.png`` (matplotlib) to
 ``benchmarks/results/`` (``--out``). Standard library only in this process: it imports
@@ -41,7 +43,7 @@ from cores import cpu_name, usable_cores  # benchmarks/, the script's folder
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "patterns"  # as benchmarks/run.py
 QUICK = "origami-simulator/Bases/*.svg"
-PASSES = ("cold", "warm", "command")
+PASSES = ("cold", "warm", "command", "warmed")
 FAILED = ("timeout", "no output")  # and "exit N": a process that did not fold
 XMAX = 30.0  # seconds: the plot's axis ends here (a longer bar is cut, its total written)
 # the child's phases in order; "fold other": fold() outside compile and solve (mesh, energy,
@@ -186,6 +188,7 @@ def markdown(results: dict[str, list[dict]], cache_mib: float, timeout: float) -
         "cold": "Cold cache",
         "warm": "Warm cache",
         "command": "The command (`python -m origami_jax fold FILE --out X.fold --quiet`), warm",
+        "warmed": "After `origami-jax warmup` only: patterns never folded before",
     }
     for name, rows in results.items():
         lines += ["", f"## {titles[name]}", ""]
@@ -252,7 +255,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--patterns", type=Path, default=SHARED, help="the patterns folder")
     parser.add_argument("--files", default=None, help="a glob under it (default: every file)")
     parser.add_argument("--quick", action="store_true", help=f"only {QUICK}")
-    parser.add_argument("--passes", default="cold,warm", help="of cold,warm,command")
+    parser.add_argument("--passes", default="cold,warm", help="of cold,warm,command,warmed")
     parser.add_argument("--timeout", type=float, default=900.0, help="seconds per process")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args(argv)
@@ -276,10 +279,17 @@ def main(argv: list[str] | None = None) -> int:
             if name != "cold" and name not in passes:
                 continue  # the cold pass always runs: it fills the cache that the others need
             one = command_row if name == "command" else fold_row
+            here = env
+            if name == "warmed":  # a cache of its own, filled by the warmup only
+                here = dict(env, XDG_CACHE_HOME=str(work / "warmed"))
+                cmd = [sys.executable, "-m", "origami_jax", "warmup", "--quiet"]
+                seconds, _, _ = run(cmd, here, args.timeout * 10)
+                warmup_s = seconds
+                print(f"warmup {seconds:.1f} s", flush=True)
             rows = []
             for path in paths:
                 load = os.getloadavg()[0]  # the machine's busyness as the process starts
-                r = one(str(path.relative_to(args.patterns)), path, env, work, args.timeout)
+                r = one(str(path.relative_to(args.patterns)), path, here, work, args.timeout)
                 r["load_1min"] = load
                 rows.append(r)
                 print(f"{name:8s} {r['file']:55s} {r['total_s']:7.2f} s  {r['status']}", flush=True)
@@ -289,6 +299,8 @@ def main(argv: list[str] | None = None) -> int:
                 results[name] = rows
                 write_csv(args.out / f"latency_{name}.csv", rows)
     text = markdown(results, cache_mib, args.timeout)
+    if "warmed" in results:
+        text += f"\n`origami-jax warmup` (the warmed pass's cache) took {warmup_s:.1f} s.\n"
     (args.out / "latency_results.md").write_text(text)
     print(text)
     if "cold" in results or "warm" in results:

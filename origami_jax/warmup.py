@@ -2,9 +2,10 @@
 
 :func:`~origami_jax.fold.fold` pads a problem to a size bucket (:mod:`origami_jax.padding`), so
 one compiled solve serves every pattern of that bucket. :func:`warmup` compiles those solves
-before any pattern needs them, by folding a single crease padded up to each bucket: once with
-a full fold (the path from flat, with the barriers: what real crease patterns mostly take) and
-once partly folded (a direct solve, without barriers: rigid-foldable tessellations). With the
+before any pattern needs them, by folding a square's diagonal padded up to each bucket: with a
+full fold along the path from flat (with the barriers: what real crease patterns mostly take),
+partly folded directly (without barriers: rigid-foldable tessellations), and fully folded
+directly (with barriers: a FOLD file given folded). With the
 persistent cache on (:func:`origami_jax.caches.use_compilation_cache`, on by default in the
 command line) that work is kept for every later process on this machine.
 
@@ -31,11 +32,26 @@ import numpy as np
 from origami_jax.energy import NO_BARRIERS, Barriers
 from origami_jax.fold import BUCKETS_PER_OCTAVE, fold, padded_at_least
 from origami_jax.padding import PAD_VERTICES, Sizes, round_up
-from origami_jax.patterns import single_crease
+from origami_jax.pattern import CreasePattern
 
 __all__ = ["warmup", "vertex_buckets"]
 
-PATHS = ("continuation", "direct")
+# "continuation": a full fold along the path from flat, with barriers (most crease patterns);
+# "direct": a partial fold without barriers (rigid-foldable tessellations); "direct-barriers":
+# a full fold solved directly, with barriers (a FOLD file given folded, a start of one's own)
+PATHS = ("continuation", "direct", "direct-barriers")
+
+
+def _diagonal(fold_angle: float) -> CreasePattern:
+    """A unit square folded along a diagonal: the smallest sheet (4 vertices, bucket 8)."""
+    return CreasePattern(
+        vertices=np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]),
+        edges=np.array([[0, 1], [1, 2], [2, 0], [2, 3], [3, 0]]),
+        faces=[(0, 1, 2), (0, 2, 3)],
+        assignments="BBVBB",
+        fold_angles=np.array([0.0, 0.0, fold_angle, 0.0, 0.0]),
+        name="diagonal",
+    )
 
 
 def vertex_buckets(max_vertices: int) -> list[int]:
@@ -57,15 +73,16 @@ def warmup(
 ) -> dict[tuple[int, str], float]:
     """Compile :func:`~origami_jax.fold.fold`'s solves for the size buckets of sheets up to
     ``max_vertices`` vertices (or the padded vertex counts ``buckets``), for ``paths``
-    (``"continuation"``: full folds along the path from flat, with barriers; ``"direct"``:
-    direct solves without barriers), in ``dtype`` (default JAX's default float) with
+    (:data:`PATHS`: ``"continuation"``, full folds along the path from flat, with barriers;
+    ``"direct"``, direct solves without barriers; ``"direct-barriers"``, direct solves with
+    them, as a FOLD file given folded takes), in ``dtype`` (default JAX's default float) with
     ``solver``. Returns the compile time (seconds; 0 where it was compiled already) of each
     (bucket, path). ``progress``: a line per bucket on stderr."""
     if BUCKETS_PER_OCTAVE <= 0:
         raise ValueError("warmup: fold pads to no buckets (fold.BUCKETS_PER_OCTAVE is 0)")
     for path in paths:
         if path not in PATHS:
-            raise ValueError(f"warmup: a path is 'continuation' or 'direct', got {path!r}")
+            raise ValueError(f"warmup: a path is one of {', '.join(PATHS)}, got {path!r}")
     if buckets is None:
         buckets = vertex_buckets(max_vertices)
     out = {}
@@ -73,13 +90,14 @@ def warmup(
         if int(n) < 2 * len(PAD_VERTICES):
             raise ValueError(f"warmup: a bucket has at least 8 vertices, got {n}")
         for path in paths:
-            full = path == "continuation"
+            full = path != "direct"
             barriers = Barriers() if full else NO_BARRIERS
             least = Sizes(n, 2 * n, n, n, 0, 3, 2 * n if full else 0, barriers)
-            crease = single_crease(fold_angle=np.pi if full else 1.0)
+            crease = _diagonal(np.pi if full else 1.0)
+            how = "continuation" if path == "continuation" else "direct"
             t = time.perf_counter()
             with padded_at_least(least):
-                result = fold(crease, solver=solver, dtype=dtype, path=path, barriers=full)
+                result = fold(crease, solver=solver, dtype=dtype, path=how, barriers=full)
             out[(int(n), path)] = result.compile_time
             if progress:
                 print(

@@ -70,11 +70,11 @@ def test_warmup_compiles_what_a_new_pattern_of_its_bucket_needs():
     assert vertex_buckets(9) == [8, 10, 11, 13]
     clear_caches()
     done = warmup(buckets=[13])
-    assert set(done) == {(13, "continuation"), (13, "direct")}
+    assert set(done) == {(13, "continuation"), (13, "direct"), (13, "direct-barriers")}
     direct = fold(patterns.miura_ori(2, 2))
     path = fold(patterns.degree4_vertex(2.5, 0.3, 3.1))
     assert direct.path == "direct" and path.path == "continuation"
     assert direct.compile_time == 0.0 and path.compile_time == 0.0
-    assert warmup(buckets=[13]) == {(13, "continuation"): 0.0, (13, "direct"): 0.0}
+    assert set(warmup(buckets=[13]).values()) == {0.0}
     with pytest.raises(ValueError, match="at least 8"):
         warmup(buckets=[5])

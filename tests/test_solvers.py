@@ -30,7 +30,7 @@ def _run_python(code: str, without: str) -> subprocess.CompletedProcess:
     """``python -c code`` in a fresh process whose environment lacks the variable ``without``."""
     env = {k: v for k, v in os.environ.items() if k != without}
     return subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=900
     )
 
 
