@@ -39,9 +39,9 @@ __all__ = [
     "unpad_metrics",
 ]
 
-# four padding vertices carry every padded bar and hinge: a bar 0-1 and a flat hinge (placed at
-# the sheet's first vertex and scaled to its mean bar: a solve's rounding floors, which scale
-# with the positions, see a sheet 1e-6 wide as they see it alone)
+# four padding vertices carry every padded bar and hinge: a bar 0-1 and a flat hinge (scaled to
+# the sheet's mean bar: a solve's rounding floors, which scale with the positions, see a sheet
+# 1e-6 wide as they see it alone)
 PAD_VERTICES = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
 # a padded triangle's normal (it lies on the first three padding vertices)
 _PAD_NORMAL = (0.0, 0.0, 1.0)
@@ -204,7 +204,7 @@ def pad_problem(problem: Problem, s: Sizes, to: Sizes) -> Problem:
         stiffness=stiffness,
     )
     start = np.asarray(problem.start)
-    corners = start[0] + length * PAD_VERTICES
+    corners = length * PAD_VERTICES  # about the origin: the padding bar is exactly ``length``
     start = np.concatenate([start, _pad_rows(corners, to.vertices - v, corners[0])])
     # every padding vertex is pinned in place (its rows repeat the first one): the gauge's
     # pins, then the padding vertices, then fill, to a length that fits every member of a bucket

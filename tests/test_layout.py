@@ -5,9 +5,12 @@ from pathlib import Path
 
 import origami_jax
 
+# a named tuple's own API, public despite the underscore
+NAMEDTUPLE = {"_fields", "_replace", "_asdict", "_make", "_field_defaults"}
+
 
 def _private(name: str) -> bool:
-    return name.startswith("_") and not name.startswith("__")
+    return name.startswith("_") and not name.startswith("__") and name not in NAMEDTUPLE
 
 
 def private_uses(root: Path) -> list[str]:
