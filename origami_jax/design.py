@@ -41,14 +41,16 @@ Example:
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
+from jax.tree_util import Partial
 
 from origami_jax.energy import Barriers, FoldParams, Reference, make_params, make_structure
 from origami_jax.pattern import CreasePattern
@@ -67,6 +69,7 @@ from origami_jax.solvers.hessian_layout import HessianLayout
 from origami_jax.solvers.newton import Newton
 
 __all__ = [
+    "Equilibrium",
     "EquilibriumInfo",
     "equilibrium_fn",
     "make_params",
@@ -220,25 +223,14 @@ def _implicit_jvp(primals, tangents):
     return positions(problem, u), project(u_dot) * scale
 
 
-class _Static(NamedTuple):
-    """What :func:`equilibrium_fn` builds on the host once: arrays closed over by ``solve``."""
-
-    structure: Any
-    flat: np.ndarray
-    default_start: np.ndarray
-    triangles: np.ndarray  # (pieces, 3) the pinned triangle (a, b, c) of each piece
-    max_step: float
-    aux: Any
-
-
-def _projectors(start: Array, triangles: np.ndarray) -> Array:
+def _projectors(start: Array, triangles: Array) -> Array:
     """(3 P, 3, 3) gauge projectors of :func:`~origami_jax.solvers.base.rigid_gauge`, computed
     in JAX from ``start``: a fixed, b on the line ab, c in the plane abc."""
     d, n = pin_axes(*(start[triangles[:, k]] for k in range(3)))
     eye = jnp.eye(3, dtype=start.dtype)
     zero = jnp.zeros_like(eye)
     proj = [
-        jnp.broadcast_to(zero, (len(triangles), 3, 3)),
+        jnp.broadcast_to(zero, (triangles.shape[0], 3, 3)),
         d[:, :, None] * d[:, None, :],
         eye - n[:, :, None] * n[:, None, :],
     ]
@@ -260,7 +252,7 @@ def equilibrium_fn(
     max_iter: int = 500,
     strict: bool = True,
     barriers: Barriers | bool | None = None,
-) -> Callable[[FoldParams, Array | None], tuple[Array, EquilibriumInfo]]:
+) -> Equilibrium:
     """A differentiable equilibrium of ``pattern``: ``solve(params, start=None)``.
 
     ``solve`` is pure and traceable: ``jit``, ``vmap`` (a batch of parameters or starts),
@@ -284,7 +276,9 @@ def equilibrium_fn(
         a design's path.
 
     Returns:
-      ``solve(params, start=None) -> (positions, info)``: ``params`` a
+      An :class:`Equilibrium` ``solve``, called as ``solve(params, start=None) -> (positions,
+      info)``; a pytree, so a jitted function that takes it as an argument compiles once for
+      all patterns of its shapes. ``params`` a
       :class:`~origami_jax.energy.FoldParams` (see :func:`make_params`; its dtype is the
       solve's), ``start`` (V, 3) positions to start from (a warm start, e.g. the last
       equilibrium; default the pattern's start or the flat sheet), ``positions`` (V, 3) the
@@ -316,63 +310,108 @@ def equilibrium_fn(
         max_step=None,
     )
     solver_aux = prepare(solver_obj, probe, mesh).aux
-    layout = solver_aux
-    if not isinstance(layout, HessianLayout):  # other solvers: Newton's layout of the Hessian
-        layout = Newton().prepare(probe, mesh).aux
-    static = _Static(
+    # the implicit derivative factors the Hessian in Newton's layout, whatever the solver
+    layout = None if isinstance(solver_aux, HessianLayout) else Newton().prepare(probe, mesh).aux
+    return Equilibrium(
         structure=structure,
-        flat=mesh.vertices,
-        default_start=default_start,
-        triangles=pinned.reshape(-1, 3),
-        max_step=default_max_step(mesh),
-        aux=layout,
+        flat=jnp.asarray(mesh.vertices),
+        default_start=jnp.asarray(default_start),
+        pinned=jnp.asarray(pinned),
+        triangles=jnp.asarray(pinned.reshape(-1, 3)),
+        max_step=jnp.asarray(default_max_step(mesh)),
+        solver_aux=solver_aux,
+        layout=layout,
+        solver=solver_obj,
+        tol=tol,
+        max_iter=int(max_iter),
+        strict=bool(strict),
     )
 
-    def make(params: FoldParams, start: Array) -> Problem:
+
+@functools.partial(
+    jax.tree_util.register_dataclass,
+    data_fields=[
+        "structure",
+        "flat",
+        "default_start",
+        "pinned",
+        "triangles",
+        "max_step",
+        "solver_aux",
+        "layout",
+    ],
+    meta_fields=["solver", "tol", "max_iter", "strict"],
+)
+@dataclass(frozen=True, eq=False)  # hashed by identity: ``jax.jit(solve)`` keys on it
+class Equilibrium:
+    """The ``solve(params, start=None)`` of :func:`equilibrium_fn`: a pytree whose leaves are
+    the pattern's arrays and whose static part is the solver and its options.
+
+    Passed as an argument to a jitted function (as :func:`design` does), it compiles once per
+    solver, options and array shapes: calls on the same pattern, or on another of the same
+    shapes, reuse the compiled code.
+    """
+
+    structure: Any
+    flat: Array
+    default_start: Array
+    pinned: Array
+    triangles: Array  # (pieces, 3) the pinned triangle (a, b, c) of each piece
+    max_step: Array
+    solver_aux: Any
+    layout: Any  # Newton's Hessian layout where the solver's own aux is not one, else None
+    solver: Solver
+    tol: float | None
+    max_iter: int
+    strict: bool
+
+    def _problem(self, params: FoldParams, start: Array) -> Problem:
         dtype = params.rest_length.dtype
         start = jnp.asarray(start, dtype)
         return Problem(
-            structure=static.structure,
+            structure=self.structure,
             params=params,
             start=start,
-            pinned=jnp.asarray(pinned),
-            projectors=_projectors(start, static.triangles),
+            pinned=self.pinned,
+            projectors=_projectors(start, self.triangles),
             tol=jnp.asarray(1.0, dtype),
-            max_step=jnp.asarray(static.max_step, dtype),
-            aux=static.aux,
+            max_step=self.max_step.astype(dtype),
+            aux=self.solver_aux if self.layout is None else self.layout,
         )
 
-    def solve(params: FoldParams, start: Array | None = None) -> tuple[Array, EquilibriumInfo]:
+    def __call__(
+        self, params: FoldParams, start: Array | None = None
+    ) -> tuple[Array, EquilibriumInfo]:
         dtype = params.rest_length.dtype
-        tol_ = (1e-10 if dtype == jnp.float64 else 1e-4) if tol is None else tol
+        tol = (1e-10 if dtype == jnp.float64 else 1e-4) if self.tol is None else self.tol
         fixed = jax.lax.stop_gradient(params)
-        start = static.default_start if start is None else jax.lax.stop_gradient(start)
+        start = self.default_start if start is None else jax.lax.stop_gradient(start)
         # the force scale: the energy's gradient on the flat sheet (fold()'s grad_max0)
-        flat = make(fixed, static.flat)
+        flat = self._problem(fixed, self.flat)
         g_flat = jnp.max(jnp.abs(jax.grad(objective)(jnp.zeros_like(flat.start), flat, None)))
         g_flat = jnp.where(g_flat > 0, g_flat, 1.0)
-        problem = make(fixed, start)
+        problem = self._problem(fixed, start)
         # the solver's own host data, in this dtype (Newton: the same layout)
         problem_solver = replace(
             problem,
             aux=jax.tree.map(
                 lambda a: a.astype(dtype) if jnp.issubdtype(a.dtype, jnp.floating) else a,
-                solver_aux,
+                self.solver_aux,
             ),
         )
-        state = solver_obj.init(problem_solver)
+        state = self.solver.init(problem_solver)
         # the solver's tolerance is relative to its start's gradient: rescale to the flat one
         g0 = jnp.where(state.grad_max0 > 0, state.grad_max0, 1.0)
-        problem_solver = replace(problem_solver, tol=jnp.asarray(tol_ * g_flat / g0, dtype))
-        done = state.grad_max0 <= tol_ * g_flat
+        problem_solver = replace(problem_solver, tol=jnp.asarray(tol * g_flat / g0, dtype))
+        done = state.grad_max0 <= tol * g_flat
         state = state._replace(
             status=jnp.where(done, Status.CONVERGED, state.status).astype(jnp.int32)
         )
-        state = solver_obj.run(state, problem_solver, jnp.int32(max_iter))
+        state = self.solver.run(state, problem_solver, jnp.int32(self.max_iter))
         values = _hessian_values(problem, state.u, state.reference)
         factor, stable, rel = _factorize(problem, values)
         grad_rel = state.grad_max / g_flat
-        converged = (state.status == Status.CONVERGED) | (grad_rel <= tol_)
+        converged = (state.status == Status.CONVERGED) | (grad_rel <= tol)
         info = EquilibriumInfo(
             converged=converged,
             status=state.status,
@@ -382,12 +421,10 @@ def equilibrium_fn(
             stable=stable,
             pivot_rel=rel,
         )
-        ok = converged & stable if strict else jnp.ones((), bool)
+        ok = converged & stable if self.strict else jnp.ones((), bool)
         scale = jnp.where(ok, 1.0, jnp.nan).astype(dtype)
         x = _implicit(params, state.u, state.reference, factor, scale, problem)
         return x, info
-
-    return solve
 
 
 # -- design goals: residuals of positions, loss = 1/2 sum r^2 ----------------------------------
@@ -408,30 +445,38 @@ def kabsch(x: Array, target: Array, weights: Array | None = None) -> Array:
     return (x - cx) @ rot.T + ct
 
 
+def _positions_residual(target: Array, weights: Array | None, x: Array) -> Array:
+    w = 1.0 if weights is None else jnp.sqrt(weights.astype(x.dtype))[:, None]
+    return (w * (x - target.astype(x.dtype))).reshape(-1)
+
+
 def target_positions(target, weights=None) -> Callable[[Array], Array]:
     """Residual ``sqrt(w) (x - target)`` (3 N,): reach given vertex positions, in the solve's
-    frame (its pinned triangle). ``target`` (V, 3); ``weights`` (V,), 0 ignores a vertex."""
-    target = jnp.asarray(target)
+    frame (its pinned triangle). ``target`` (V, 3); ``weights`` (V,), 0 ignores a vertex.
 
-    def residual(x: Array) -> Array:
-        w = 1.0 if weights is None else jnp.sqrt(jnp.asarray(weights, x.dtype))[:, None]
-        return (w * (x - target.astype(x.dtype))).reshape(-1)
+    Like every ``target_*`` goal, a :class:`jax.tree_util.Partial`: its data are pytree
+    leaves, so :func:`design` compiles once for all goals of one kind and shape."""
+    weights = None if weights is None else jnp.asarray(weights)
+    return Partial(_positions_residual, jnp.asarray(target), weights)
 
-    return residual
+
+def _shape_residual(target: Array, weights: Array | None, x: Array) -> Array:
+    t = target.astype(x.dtype)
+    aligned = kabsch(x, t, weights)
+    w = 1.0 if weights is None else jnp.sqrt(weights.astype(x.dtype))[:, None]
+    return (w * (aligned - t)).reshape(-1)
 
 
 def target_shape(target, weights=None) -> Callable[[Array], Array]:
     """Residual of :func:`target_positions` after the best rigid alignment (Kabsch) of ``x`` to
     ``target`` (V, 3): a shape up to rigid motion."""
-    target = jnp.asarray(target)
+    weights = None if weights is None else jnp.asarray(weights)
+    return Partial(_shape_residual, jnp.asarray(target), weights)
 
-    def residual(x: Array) -> Array:
-        t = target.astype(x.dtype)
-        aligned = kabsch(x, t, weights)
-        w = 1.0 if weights is None else jnp.sqrt(jnp.asarray(weights, x.dtype))[:, None]
-        return (w * (aligned - t)).reshape(-1)
 
-    return residual
+def _height_residual(height: Array, axis: Array, x: Array) -> Array:
+    z = jnp.take(x, axis, axis=1)
+    return (jnp.max(z) - jnp.min(z) - jnp.asarray(height, x.dtype))[None]
 
 
 def target_height(height: float, axis: int = 2) -> Callable[[Array], Array]:
@@ -439,35 +484,31 @@ def target_height(height: float, axis: int = 2) -> Callable[[Array], Array]:
 
     Measured in the solve's frame, where the pinned facet keeps its place (see
     :func:`target_distance` for a measure independent of rigid motion)."""
+    return Partial(_height_residual, jnp.asarray(height), jnp.asarray(axis, jnp.int32))
 
-    def residual(x: Array) -> Array:
-        return (jnp.max(x[:, axis]) - jnp.min(x[:, axis]) - height)[None]
 
-    return residual
+def _span_residual(span: Array, axes: Array, x: Array) -> Array:
+    p = jnp.take(x, axes, axis=1)
+    return jnp.max(p, axis=0) - jnp.min(p, axis=0) - jnp.asarray(span, x.dtype)
 
 
 def target_span(span, axes=(0, 1)) -> Callable[[Array], Array]:
     """Residual (len(axes),): bounding-box extents along ``axes`` minus ``span`` (a scalar or
     one value per axis), in the solve's frame (the pinned facet keeps its place)."""
-    axes = tuple(np.atleast_1d(axes))
+    axes = np.atleast_1d(np.asarray(axes, np.int32))
+    return Partial(_span_residual, jnp.asarray(span), jnp.asarray(axes))
 
-    def residual(x: Array) -> Array:
-        p = x[:, axes]
-        return jnp.max(p, axis=0) - jnp.min(p, axis=0) - jnp.asarray(span, x.dtype)
 
-    return residual
+def _distance_residual(pairs: Array, distance: Array, x: Array) -> Array:
+    d = x[pairs[:, 1]] - x[pairs[:, 0]]
+    return jnp.sqrt(jnp.sum(d * d, axis=-1)) - jnp.asarray(distance, x.dtype)
 
 
 def target_distance(pairs, distance) -> Callable[[Array], Array]:
     """Residual (P,): distances between vertex ``pairs`` (P, 2) minus ``distance`` (scalar or
     (P,)): a span measured between chosen vertices, independent of rigid motion."""
     pairs = np.atleast_2d(np.asarray(pairs, np.int32))
-
-    def residual(x: Array) -> Array:
-        d = x[pairs[:, 1]] - x[pairs[:, 0]]
-        return jnp.sqrt(jnp.sum(d * d, axis=-1)) - jnp.asarray(distance, x.dtype)
-
-    return residual
+    return Partial(_distance_residual, jnp.asarray(pairs), jnp.asarray(distance))
 
 
 def target_surface(
@@ -487,6 +528,7 @@ def target_surface(
     if kind not in ("height", "sdf"):
         raise ValueError(f"kind must be 'height' or 'sdf', got {kind!r}")
 
+    # the surface is the user's function: this goal compiles anew for each one
     def residual(x: Array) -> Array:
         w = jnp.ones(x.shape[0], x.dtype) if weights is None else jnp.asarray(weights, x.dtype)
         if kind == "sdf":
@@ -497,7 +539,7 @@ def target_surface(
                 r = r - jnp.sum(w * r) / jnp.sum(w)
         return jnp.sqrt(w) * r
 
-    return residual
+    return Partial(residual)
 
 
 # -- the design loop -----------------------------------------------------------------------------
@@ -528,12 +570,46 @@ class DesignResult(NamedTuple):
     reason: str
 
 
-def _as_loss(objective: Callable[[Array], Array]) -> Callable[[Array], Array]:
-    def loss(x):
-        r = objective(x)
-        return r if jnp.ndim(r) == 0 else 0.5 * jnp.sum(r * r)
+def _loss(residual: Array) -> Array:
+    """A scalar objective as it is, a vector of residuals as ``1/2 sum r^2``."""
+    return residual if jnp.ndim(residual) == 0 else 0.5 * jnp.sum(residual * residual)
 
-    return loss
+
+def _as_tree(fn: Callable) -> Partial:
+    """``fn`` as a pytree argument of the jitted steps: a :class:`~jax.tree_util.Partial`
+    keeps its data as leaves; any other callable is static (compiled once per object)."""
+    return fn if isinstance(fn, Partial) else Partial(fn)
+
+
+def _free_targets(free: Array, z: Array, p: FoldParams) -> FoldParams:
+    """The default ``to_params``: ``z`` are the targets of the creases marked ``free``."""
+    return p._replace(target=jnp.where(free, z, p.target))
+
+
+@jax.jit
+def _value_and_grad(solve, objective, to_params, base, z, start, free_mask):
+    """(loss, its gradient on the free variables, positions, info) at ``z`` (compiled once per
+    solver, goal kind and shapes: every argument is a pytree)."""
+
+    def f(z):
+        x, info = solve(to_params(z, base), start)
+        return _loss(objective(x)), (x, info)
+
+    (value, (x, info)), g = jax.value_and_grad(f, has_aux=True)(z)
+    return value, jnp.where(free_mask, g, 0.0), x, info
+
+
+@jax.jit
+def _residual_jacobian(solve, objective, to_params, base, z, start, free_mask):
+    """(residuals, their Jacobian on the free variables by forward mode, positions, info)."""
+
+    def r(z):
+        x, info = solve(to_params(z, base), start)
+        res = objective(x)
+        return res, (res, x, info)
+
+    jac, (res, x, info) = jax.jacfwd(r, has_aux=True)(z)
+    return res, jnp.where(free_mask[None, :], jac, 0.0), x, info
 
 
 def design(
@@ -593,19 +669,17 @@ def design(
     solve = equilibrium_fn(pattern, solver=solver, tol=tol, max_iter=max_iter)
     base = make_params(pattern) if params is None else params
     dtype = base.rest_length.dtype
-    loss_of_x = _as_loss(objective)
+    objective = _as_tree(objective)
     if to_params is None:
         free = np.ones(base.target.shape[0], bool) if fixed is None else ~np.asarray(fixed)
         z0 = base.target if init is None else jnp.asarray(init, dtype)
-
-        def to_params(z, p):
-            return p._replace(target=jnp.where(jnp.asarray(free), z, p.target))
-
+        to_params = Partial(_free_targets, jnp.asarray(free))
     else:
         free = None if fixed is None else ~np.asarray(fixed)
         if init is None:
             raise ValueError("design: init is required with to_params")
         z0 = jnp.asarray(init, dtype)
+        to_params = _as_tree(to_params)
     z0 = jnp.asarray(z0, dtype)
     free_mask = jnp.ones(z0.shape, bool) if free is None else jnp.asarray(free)
 
@@ -613,28 +687,11 @@ def design(
         z = jnp.where(free_mask, z, z0)
         return jnp.clip(z, -jnp.pi, jnp.pi) if clip else z
 
-    def run(z, start):
-        x, info = solve(to_params(z, base), start)
-        return x, info
-
-    @jax.jit
     def value_and_grad(z, start):
-        def f(z):
-            x, info = run(z, start)
-            return loss_of_x(x), (x, info)
+        return _value_and_grad(solve, objective, to_params, base, z, start, free_mask)
 
-        (value, (x, info)), g = jax.value_and_grad(f, has_aux=True)(z)
-        return value, jnp.where(free_mask, g, 0.0), x, info
-
-    @jax.jit
     def jacobian(z, start):
-        def r(z):
-            x, info = run(z, start)
-            res = objective(x)
-            return res, (res, x, info)
-
-        jac, (res, x, info) = jax.jacfwd(r, has_aux=True)(z)
-        return res, jnp.where(free_mask[None, :], jac, 0.0), x, info
+        return _residual_jacobian(solve, objective, to_params, base, z, start, free_mask)
 
     z = project(z0)
     # an array from the first solve on (None would compile the solve once more for the warm starts)

@@ -336,3 +336,29 @@ def test_design_with_optax_respects_fixed_creases():
     assert r.history["loss"][-1] < r.history["loss"][0]
     assert float(r.variables[0]) == float(base.target[0])
     assert len(r.history["loss"]) == r.steps + 1
+
+
+def test_design_calls_reuse_the_compiled_solve():
+    """A second design() on the same pattern, another goal of the same kind, and a pattern of
+    the same shapes compile nothing (issue 44: design loops)."""
+    compiles = []
+
+    def listener(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(duration)
+
+    cp = patterns.miura_ori(2, 2, fold_angle=1.0)
+    first = design(cp, target_height(0.5), steps=3)
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        again = design(cp, target_height(0.5), steps=3)
+        other_goal = design(cp, target_height(0.45), steps=3)
+        same_shapes = patterns.miura_ori(2, 2, fold_angle=0.9)
+        other_pattern = design(same_shapes, target_height(0.5), steps=3)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert compiles == []
+    np.testing.assert_array_equal(again.variables, first.variables)
+    for r in (first, other_goal, other_pattern):
+        assert bool(r.info.ok) and r.loss < 1e-8, r.reason
+    assert not np.allclose(other_goal.variables, first.variables)
