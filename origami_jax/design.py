@@ -53,6 +53,7 @@ from jax import Array
 from jax.tree_util import Partial
 
 from origami_jax.energy import Barriers, FoldParams, Reference, make_params, make_structure
+from origami_jax.fold import checked_start, default_tol
 from origami_jax.pattern import CreasePattern
 from origami_jax.solvers import Solver, Status, get_solver, hostsparse
 from origami_jax.solvers.assembly import gauged_hessian
@@ -61,6 +62,7 @@ from origami_jax.solvers.base import (
     default_max_step,
     objective,
     pin_axes,
+    pin_projectors,
     positions,
     prepare,
     rigid_gauge,
@@ -225,24 +227,9 @@ def _implicit_jvp(primals, tangents):
 
 def _projectors(start: Array, triangles: Array) -> Array:
     """(3 P, 3, 3) gauge projectors of :func:`~origami_jax.solvers.base.rigid_gauge`, computed
-    in JAX from ``start``: a fixed, b on the line ab, c in the plane abc."""
+    in JAX from ``start`` (differentiable, unlike the host-side gauge)."""
     d, n = pin_axes(*(start[triangles[:, k]] for k in range(3)))
-    eye = jnp.eye(3, dtype=start.dtype)
-    zero = jnp.zeros_like(eye)
-    proj = [
-        jnp.broadcast_to(zero, (triangles.shape[0], 3, 3)),
-        d[:, :, None] * d[:, None, :],
-        eye - n[:, :, None] * n[:, None, :],
-    ]
-    return jnp.stack(proj, axis=1).reshape(-1, 3, 3)
-
-
-def _default_start(pattern: CreasePattern) -> np.ndarray:
-    """(V, 3) where a solve starts by default: the pattern's pre-folded start, else flat."""
-    mesh = pattern.mesh
-    if pattern.start is not None:
-        return np.asarray(pattern.start[mesh.source_vertex], np.float64)
-    return mesh.vertices
+    return jnp.stack(pin_projectors(d, n), axis=1).reshape(-1, 3, 3)
 
 
 def equilibrium_fn(
@@ -297,7 +284,8 @@ def equilibrium_fn(
     solver_obj = get_solver(solver)
     mesh = pattern.mesh
     structure = make_structure(mesh, barriers)
-    default_start = _default_start(pattern)
+    start = checked_start(pattern, None)  # the pattern's pre-folded start, else flat
+    default_start = mesh.vertices if start is None else start
     pinned, _ = rigid_gauge(mesh, default_start)
     # the solver's host-side data (Newton: the Hessian layout), built once
     probe = Problem(
@@ -383,7 +371,7 @@ class Equilibrium:
         self, params: FoldParams, start: Array | None = None
     ) -> tuple[Array, EquilibriumInfo]:
         dtype = params.rest_length.dtype
-        tol = (1e-10 if dtype == jnp.float64 else 1e-4) if self.tol is None else self.tol
+        tol = default_tol(dtype) if self.tol is None else self.tol
         fixed = jax.lax.stop_gradient(params)
         start = self.default_start if start is None else jax.lax.stop_gradient(start)
         # the force scale: the energy's gradient on the flat sheet (fold()'s grad_max0)
@@ -695,7 +683,7 @@ def design(
 
     z = project(z0)
     # an array from the first solve on (None would compile the solve once more for the warm starts)
-    start = jnp.asarray(_default_start(pattern), dtype)
+    start = solve.default_start.astype(dtype)
     losses, gnorms = [], []
     reason = f"step limit {steps} reached"
     if optimizer == "gauss_newton":

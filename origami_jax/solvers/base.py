@@ -451,9 +451,8 @@ def rigid_gauges(
         n = _cross(d, start[rows, c] - start[rows, a])
         d = d / np.sqrt(np.sum(d * d, axis=1, keepdims=True))
         n = n / np.sqrt(np.sum(n * n, axis=1, keepdims=True))
-        outer = lambda u: u[:, :, None] * u[:, None, :]  # noqa: E731
         pinned += [a, b, c]
-        projectors += [np.zeros((len(rows), 3, 3)), outer(d), np.eye(3) - outer(n)]
+        projectors += pin_projectors(d, n)
     return np.stack(pinned, axis=1).astype(np.int32), np.stack(projectors, axis=1)
 
 
@@ -503,6 +502,13 @@ def pin_axes(a: Array, b: Array, c: Array) -> tuple[Array, Array]:
         return jnp.where(norm > 0, w / jnp.where(norm > 0, norm, 1), 0)
 
     return unit(b - a), unit(jnp.cross(b - a, c - a))
+
+
+def pin_projectors(d, n) -> list:
+    """The projectors of a pinned triangle's vertices a, b, c: a fixed, b on the line of unit
+    ``d``, c in the plane of unit normal ``n`` ((..., 3) each; NumPy or JAX arrays alike)."""
+    along = d[..., :, None] * d[..., None, :]
+    return [0 * along, along, np.eye(3).astype(n.dtype) - n[..., :, None] * n[..., None, :]]
 
 
 def gauge(problem: Problem, u: Array) -> Array:
