@@ -94,9 +94,10 @@ def default_tol(dtype) -> float:
     return 1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-4
 
 
-@dataclass
+@dataclass(frozen=True)
 class FoldResult:
-    """A folded state and how it was reached.
+    """A folded state and how it was reached (immutable: ``dataclasses.replace`` makes a
+    changed copy).
 
     ``positions`` (V, 3): the pattern's vertices first, in its order (then copies made by cuts);
     ``fold_angles`` (E,): per mesh edge, radians (pattern edges first, then triangulation edges;

@@ -7,7 +7,7 @@ import json
 import math
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import meshio
@@ -734,7 +734,7 @@ def test_vtu_carries_strain_and_fold_angles(tmp_path):
     cp = cut_pattern()
     mesh = cp.mesh
     res = folded(cp, seed=1)
-    res.positions = 2.0 * mesh.vertices  # every edge stretched by 100 %
+    res = replace(res, positions=2.0 * mesh.vertices)  # every edge stretched 100 %
     path = tmp_path / "out.vtu"
     save_mesh(path, res)
     m = meshio.read(path)
