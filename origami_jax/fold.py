@@ -56,7 +56,16 @@ from origami_jax.metrics import (
     position_metrics,
     shape_error,
 )
-from origami_jax.padding import Sizes, bucket, pad_problem, sizes_of, unpad_metrics
+from origami_jax.padding import (
+    BATCH_FLOORS,
+    PLANAR_FLOORS,
+    Floors,
+    Sizes,
+    bucket,
+    pad_problem,
+    sizes_of,
+    unpad_metrics,
+)
 from origami_jax.pattern import CreasePattern, PatternError
 from origami_jax.progress import ProgressBar
 from origami_jax.solvers import Solver, Status, get_solver
@@ -368,6 +377,14 @@ def padded_at_least(sizes: Sizes) -> Iterator[None]:
         _AT_LEAST.reset(token)
 
 
+def bucket_floors(solver: Solver) -> Floors:
+    """The least element counts of ``fold``'s buckets for ``solver``: those of every
+    triangulated sheet of the bucket's vertex count where the elements cost little beside a
+    dense factorization (Newton: one bucket per vertex count, whatever the pattern), else
+    ``fold_batch``'s (padded elements would slow each iteration)."""
+    return PLANAR_FLOORS if solver.cost_by_vertices() else BATCH_FLOORS
+
+
 def prepared(solver: Solver, problem, mesh, dtype):
     """``(problem, padding)``: ``problem`` prepared for ``solver``, padded to its size bucket
     (:data:`BUCKETS_PER_OCTAVE`) and prepared as ``fold_batch`` prepares its members where
@@ -380,7 +397,7 @@ def prepared(solver: Solver, problem, mesh, dtype):
     if solver.host_callbacks(plain):
         return plain, None
     sizes = sizes_of(problem)
-    to = bucket(sizes, BUCKETS_PER_OCTAVE)
+    to = bucket(sizes, BUCKETS_PER_OCTAVE, bucket_floors(solver))
     least = _AT_LEAST.get()
     if least is not None:
         to = to._replace(**{k: max(getattr(to, k), getattr(least, k)) for k in Sizes._fields[:7]})

@@ -30,7 +30,11 @@ from origami_jax.solvers.base import Problem, rigid_gauge
 __all__ = [
     "PAD_VERTICES",
     "Sizes",
+    "Floors",
+    "BATCH_FLOORS",
+    "PLANAR_FLOORS",
     "bucket",
+    "floor_sizes",
     "round_up",
     "problem_sizes",
     "sizes_of",
@@ -72,30 +76,62 @@ def round_up(n: int, per_octave: int = 1) -> int:
     return round(2.0 ** (k / per_octave))
 
 
-def bucket(sizes: Sizes, per_octave: int = 1) -> Sizes:
+class Floors(NamedTuple):
+    """The least element counts of a bucket, as multiples of its padded vertex count."""
+
+    bars: int = 2
+    creases: int = 1
+    facets: int = 1
+    triangles: int = 2
+
+
+# fold_batch's floors: most sheets of one size share a bucket, at little padding
+BATCH_FLOORS = Floors()
+# every triangulated sheet of V vertices fits these (Euler: at most 3 V - 6 edges, of which the
+# creases and facet creases are some, and 2 V - 5 triangles), so it pads to its vertex bucket
+PLANAR_FLOORS = Floors(bars=3, creases=3, facets=3, triangles=2)
+
+
+def bucket(sizes: Sizes, per_octave: int = 1, floors: Floors = BATCH_FLOORS) -> Sizes:
     """The padded sizes of a problem: each count rounded up to a power of two (``per_octave``
     steps per doubling: 4 rounds up by at most 19 %), with room for the four padding vertices
-    and one padding bar (which padded hinges point to), and at least twice the padded vertex
-    count of bars and as many creases and facet creases as vertices.
+    and one padding bar (which padded hinges point to), and at least ``floors`` times the
+    padded vertex count of each kind of element.
 
     The floors tie the element counts to the vertex bucket, so patterns of one size share a
     compiled solve whatever their mix of creases and facets (a stream of 100 random Miura-ori
-    and waterbomb sheets makes 7 buckets instead of 17); dense Newton's cost is set by the
-    vertex count, and the extra padded elements cost little."""
+    and waterbomb sheets makes 7 buckets instead of 17 at :data:`BATCH_FLOORS`); dense
+    Newton's cost is set by the vertex count, and the extra padded elements cost little."""
 
     def up(n: int) -> int:
         return round_up(n, per_octave)
 
     vertices = up(sizes.vertices + len(PAD_VERTICES))
+    least = floor_sizes(vertices, floors, sizes.barriers)
     return Sizes(
         vertices=vertices,
-        bars=max(up(sizes.bars + 1), 2 * vertices),
-        creases=max(up(sizes.creases), vertices),
-        facets=max(up(sizes.facets), vertices),
+        bars=max(up(sizes.bars + 1), least.bars),
+        creases=max(up(sizes.creases), least.creases),
+        facets=max(up(sizes.facets), least.facets),
         free=up(sizes.free),
         pinned=up(sizes.pinned),
-        triangles=max(up(sizes.triangles), 2 * vertices) if sizes.triangles else 0,
+        triangles=max(up(sizes.triangles), floors.triangles * vertices) if sizes.triangles else 0,
         barriers=sizes.barriers,
+    )
+
+
+def floor_sizes(vertices: int, floors: Floors, barriers: Barriers = NO_BARRIERS) -> Sizes:
+    """The least :class:`Sizes` of the bucket of ``vertices`` padded vertices: its floors, the
+    pinned triangle of one piece, and barrier triangles where the area barrier is built."""
+    return Sizes(
+        vertices=vertices,
+        bars=floors.bars * vertices,
+        creases=floors.creases * vertices,
+        facets=floors.facets * vertices,
+        free=0,
+        pinned=3,
+        triangles=floors.triangles * vertices if barriers.area_floor > 0 else 0,
+        barriers=barriers,
     )
 
 

@@ -10,10 +10,11 @@ persistent cache on (:func:`origami_jax.caches.use_compilation_cache`, on by def
 command line) that work is kept for every later process on this machine.
 
 A bucket is named by its padded vertex count; the element counts are the bucket's least
-(:func:`~origami_jax.padding.bucket`'s floors), which a sheet of that many vertices fits unless
-it has more creases or facet creases than vertices, more than two bars per vertex, or free
-hinges. Those, Newton's sparse solves (above its ``dense_max``, 200 vertices) and folds with
-self-contact still compile on first use.
+(:func:`~origami_jax.fold.bucket_floors`: for Newton those of any triangulated sheet of that
+many vertices), so with Newton every sheet of one piece without free hinges falls in a warmed
+bucket. Sheets with free hinges or several pieces, other solvers' sheets beyond the floors,
+Newton's sparse solves (above its ``dense_max``, 200 vertices) and folds with self-contact
+still compile on first use.
 
 Example:
   >>> import origami_jax as oj
@@ -30,9 +31,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from origami_jax.energy import NO_BARRIERS, Barriers
-from origami_jax.fold import BUCKETS_PER_OCTAVE, fold, padded_at_least
-from origami_jax.padding import PAD_VERTICES, Sizes, round_up
+from origami_jax.fold import BUCKETS_PER_OCTAVE, bucket_floors, fold, padded_at_least
+from origami_jax.padding import PAD_VERTICES, floor_sizes, round_up
 from origami_jax.pattern import CreasePattern
+from origami_jax.solvers import get_solver
 
 __all__ = ["warmup", "vertex_buckets"]
 
@@ -85,6 +87,7 @@ def warmup(
             raise ValueError(f"warmup: a path is one of {', '.join(PATHS)}, got {path!r}")
     if buckets is None:
         buckets = vertex_buckets(max_vertices)
+    floors = bucket_floors(get_solver(solver))
     out = {}
     for n in buckets:
         if int(n) < 2 * len(PAD_VERTICES):
@@ -92,7 +95,7 @@ def warmup(
         for path in paths:
             full = path != "direct"
             barriers = Barriers() if full else NO_BARRIERS
-            least = Sizes(n, 2 * n, n, n, 0, 3, 2 * n if full else 0, barriers)
+            least = floor_sizes(n, floors, barriers)
             crease = _diagonal(np.pi if full else 1.0)
             how = "continuation" if path == "continuation" else "direct"
             t = time.perf_counter()

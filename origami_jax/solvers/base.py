@@ -361,6 +361,11 @@ class Solver(ABC):
         """Whether the solve of ``problem`` (prepared) calls back to the host."""
         return False
 
+    def cost_by_vertices(self) -> bool:
+        """Whether an iteration's cost is set by the vertex count (a dense factorization), so
+        that padding the elements up to any sheet's counts costs little (``fold``'s buckets)."""
+        return False
+
 
 def check_start(solver: Solver, state) -> None:
     """``solver.check_start(state)`` (kept for callers of the function)."""

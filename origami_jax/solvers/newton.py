@@ -753,6 +753,10 @@ class Newton(Solver):
         """Sparse solves factor on the host (:mod:`~origami_jax.solvers.hostsparse`)."""
         return isinstance(problem.aux, HessianLayout) and problem.aux.sparse
 
+    def cost_by_vertices(self) -> bool:
+        """A padded (dense) solve's cost is its Cholesky factorization's: the vertex count's."""
+        return True
+
     def prepare_batch(self, problem: Problem, mesh: Mesh) -> Problem:
         """The dense Hessian layout of the (padded) problem's own elements."""
         elements = [np.asarray(e) for e in hessian_elements(problem.structure)]
