@@ -7,11 +7,13 @@ from pathlib import Path
 # Compilation dominates the suite's time and its patterns are small: skip XLA's expensive CPU
 # optimisations and its newer fusion emitters (together about half the compile time on a 3 x 3
 # Miura-ori; the tests' runs are short anyway).
-os.environ["XLA_FLAGS"] = (
-    os.environ.get("XLA_FLAGS", "")
-    + " --xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true"
-    + " --xla_cpu_use_fusion_emitters=false"
-).strip()
+# tests/test_optimised.py runs some modules again as users run them: XLA's defaults
+if not os.environ.get("ORIGAMI_JAX_TEST_XLA_DEFAULTS"):
+    os.environ["XLA_FLAGS"] = (
+        os.environ.get("XLA_FLAGS", "")
+        + " --xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true"
+        + " --xla_cpu_use_fusion_emitters=false"
+    ).strip()
 
 # One compilation cache for the whole run, set before pytest-xdist starts its workers and
 # inherited by them and by the notebooks' kernels: a program compiled by one test (a solver
