@@ -6,7 +6,6 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-import time
 
 import numpy as np
 import pytest
@@ -284,7 +283,8 @@ def test_fold_result_intersections():
 # -- shared patterns (skipped without ../shared) ---------------------------------------------
 
 
-def test_largest_shared_pattern_is_cheap(shared_patterns):
+def test_largest_shared_pattern_flat_bumped_and_crumpled(shared_patterns):
+    """The 2,601-vertex sheet: flat and smoothly bumped, no pair; crumpled at random, pairs."""
     path = shared_patterns / "origami-simulator" / "Pleating" / "BoxPleatInOutWave.fold"
     if not path.is_file():
         pytest.skip(f"{path} is not present")
@@ -298,8 +298,5 @@ def test_largest_shared_pattern_is_cheap(shared_patterns):
     crumpled = flat + rng.normal(0.0, size, flat.shape)
     cases = [("flat", flat, True), ("bump", bump, True), ("crumpled", crumpled, False)]
     for name, x, clean in cases:
-        start = time.perf_counter()
         found = intersecting_pairs(x, tri, depth)
-        elapsed = time.perf_counter() - start
-        assert elapsed < 1.0, (name, elapsed)  # about 10 to 30 ms on one core
         assert (len(found) == 0) == clean, name
