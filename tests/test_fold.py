@@ -145,7 +145,7 @@ def test_float32():
     result = fold(cp, dtype=jnp.float32, reference_positions=rigid_fold(cp))
     assert result.dtype == "float32"
     assert result.converged, result.reason
-    assert result.fold_angle_error_max <= 1e-3
+    assert result.fold_angle_error_max <= 1e-4  # the bound docs/extreme.md gives float32
     assert result.shape_error <= 1e-4
     # asked for a tolerance below its rounding floor, float32 stops at the floor and says so
     floor = fold(cp, dtype=jnp.float32, tol=1e-12, max_iter=20_000)
