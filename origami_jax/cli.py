@@ -106,6 +106,13 @@ def _scene_arguments(p: argparse.ArgumentParser, out_help: str) -> None:
     )
     p.add_argument("--float32", action="store_true", help="solve in float32 (default float64)")
     p.add_argument(
+        "--stiffness",
+        type=_stiffness_argument,
+        metavar="A,F,C",
+        help="spring constants AXIAL,FACET,CREASE (force units: energy per length; default "
+        "1,0.02,0.001), or origami-simulator for Origami Simulator's (20,0.7,0.7)",
+    )
+    p.add_argument(
         "--contact",
         nargs="?",
         const=True,
@@ -120,6 +127,21 @@ def _scene_arguments(p: argparse.ArgumentParser, out_help: str) -> None:
         "keep compiled code in the per-user persistent cache, so the next run of a pattern of "
         "the same shapes starts sooner (default: on; --no-cache: off)",
     )
+
+
+def _stiffness_argument(text: str):
+    """``--stiffness``: ``origami-simulator``, or (axial, facet, crease), axial positive and the
+    others 0 or more (parsed without importing the package)."""
+    if text == "origami-simulator":
+        return text
+    values = text.split(",")
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(
+            f"expected AXIAL,FACET,CREASE or origami-simulator, got {text!r}"
+        )
+    axial = _number(float, "positive", 0.0, strict=True)(values[0].strip())
+    rest = _number(float, "0 or more", 0.0)
+    return (axial, rest(values[1].strip()), rest(values[2].strip()))
 
 
 def _cache_argument(p: argparse.ArgumentParser, what: str) -> None:
@@ -244,12 +266,22 @@ def _load(args):
 
     if args.input and args.example:
         raise ValueError("give an INPUT file or --example, not both")
+    given = _stiffness(args.stiffness)
     if args.input:
-        return io.load(args.input), None
+        return io.load(args.input), given
     name = args.example or "seed_waterbomb"
     # the seed's scene folds with the seed's stiffness, so its energies compare with the seed's
-    stiffness = patterns.SEED_WATERBOMB_STIFFNESS if name == "seed_waterbomb" else None
-    return getattr(patterns, name)(), stiffness
+    seed = patterns.SEED_WATERBOMB_STIFFNESS if name == "seed_waterbomb" else None
+    return getattr(patterns, name)(), seed if given is None else given
+
+
+def _stiffness(given):
+    """The :class:`~origami_jax.energy.Stiffness` of ``--stiffness`` (None if not given)."""
+    from origami_jax.energy import ORIGAMI_SIMULATOR_STIFFNESS, Stiffness
+
+    if given is None:
+        return None
+    return ORIGAMI_SIMULATOR_STIFFNESS if given == "origami-simulator" else Stiffness(*given)
 
 
 RENDER_FORMATS = (".png", ".html", ".gif", ".mp4")
@@ -369,7 +401,7 @@ def _run(args: argparse.Namespace) -> int:
         return _info(args.input)
     if args.command == "warmup":
         return _warmup(args)
-    from origami_jax import PatternError, io
+    from origami_jax import PatternError, io, patterns
     from origami_jax.fold import fold
 
     if args.command == "render":
@@ -395,7 +427,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(result.summary())
-    if stiffness is not None:
+    if stiffness is patterns.SEED_WATERBOMB_STIFFNESS:
         print(
             f"{'seed paper':<20}  energy {result.history['energy'][0]:.6f} at the start, "
             f"{SEED_FINAL_ENERGY} when its simulator was stopped (it never converged)"

@@ -113,6 +113,11 @@ class Stiffness(NamedTuple):
     crease: float | Array = 0.001
 
 
+# Origami Simulator's default springs (axial 20, facet and crease 0.7; the same per-length
+# forms as here), for side-by-side folds; its face (corner-angle) stiffness has no term here
+ORIGAMI_SIMULATOR_STIFFNESS = Stiffness(axial=20.0, facet=0.7, crease=0.7)
+
+
 class Barriers(NamedTuple):
     """Which barriers of :mod:`origami_jax.barrier` a scene has, and their sizes (static).
 

@@ -200,6 +200,9 @@ def test_version_attribute():
         (["render", "--fps", "0"], "argument --fps: must be 1 or more, got 0"),
         (["render", "--dpi", "0"], "argument --dpi: must be 1 or more, got 0"),
         (["fold", "--contact", "0"], "argument --contact: must be a positive length, got 0"),
+        (["fold", "--stiffness", "1,2"], "argument --stiffness: expected AXIAL,FACET,CREASE"),
+        (["render", "--stiffness", "0,1,1"], "argument --stiffness: must be positive, got 0"),
+        (["fold", "--stiffness", "1,nan,1"], "argument --stiffness: must be 0 or more, got nan"),
     ],
 )
 def test_out_of_range_arguments_are_refused(argv, message, capsys, tmp_path, monkeypatch):
@@ -220,6 +223,32 @@ def test_contact_option_parses_to_fold_s_argument():
     assert parse(["fold"]).contact is False
     assert parse(["fold", "--contact"]).contact is True
     assert parse(["render", "--contact", "0.01"]).contact == 0.01
+
+
+def test_stiffness_option_folds_with_those_springs(tmp_path, capsys):
+    """``--stiffness A,F,C`` and ``origami-simulator`` reach fold(): the seed's scene (not
+    rigid-foldable: its equilibrium energy depends on the springs) ends with the energy of a
+    fold with those springs, and no line comparing it with the seed paper's."""
+    from origami_jax import fold, patterns
+    from origami_jax.cli import build_parser
+    from origami_jax.energy import ORIGAMI_SIMULATOR_STIFFNESS, Stiffness
+
+    parse = build_parser().parse_args
+    assert parse(["fold"]).stiffness is None
+    assert parse(["fold", "--stiffness", "2, 0.1,0"]).stiffness == (2.0, 0.1, 0.0)
+    out = tmp_path / "crease.fold"
+    for given, springs in [
+        ("origami-simulator", ORIGAMI_SIMULATOR_STIFFNESS),
+        ("2,0.1,0.003", Stiffness(2.0, 0.1, 0.003)),
+    ]:
+        argv = ["fold", "--example", "seed_waterbomb", "--stiffness", given, "--out", str(out)]
+        assert main([*argv, "--quiet"]) == 0
+        printed = capsys.readouterr().out
+        expected = fold(patterns.seed_waterbomb(), stiffness=springs)
+        assert expected.converged and expected.energy > 1e-6
+        energy = next(line for line in printed.splitlines() if line.startswith("energy"))
+        assert float(energy.split()[-1]) == pytest.approx(expected.energy, rel=1e-5)
+        assert "seed paper" not in printed
 
 
 def test_warmup_compiles_the_smallest_bucket(capsys):
