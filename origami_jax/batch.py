@@ -30,10 +30,12 @@ result out and take the next problem of the queue (continuous batching: no slot 
 slowest member of a chunk, nor for the host). The queue takes the problems that fold furthest
 first (:func:`_fold_extents`): slots of like problems waste less of each vmapped iteration, and
 the last problems to enter finish quickly. With several devices the slots and the queue are
-split across them (``jax.shard_map``). Each call runs about a tenth of a second of iterations;
-the next one is dispatched before the host reads the results of the last, shows progress and
-hands the finished problems on; an interrupted batch (Ctrl-C) returns the problems already
-done. Few slots suit CPUs (:data:`CPU_SLOTS`, 32 per device: one device's slots stay in its
+split across them (``jax.shard_map``); with several processes (``jax.distributed``, one per
+host say) each folds a share on its own devices and every process returns all the results
+(:mod:`origami_jax.processes` carries them). Each call runs about a tenth of a second of
+iterations; the next one is dispatched before the host reads the results of the last, shows
+progress and hands the finished problems on; an interrupted batch (Ctrl-C) returns the problems
+already done. Few slots suit CPUs (:data:`CPU_SLOTS`, 32 per device: one device's slots stay in its
 caches) (measured: docs/design-notes/measurements.md).
 
 Example:
