@@ -337,7 +337,8 @@ def fold_batch(
       the list holds the results of the problems already done and ``None`` for the rest,
       with a warning; the problems that fold furthest are taken first (:func:`_fold_extents`),
       so those are the ones done. Shared among processes, an interrupted process hands the
-      others the results it has and returns at once (``None`` for the others' shares).
+      others the results it has and returns at once (``None`` for the others' shares); the
+      others return them, ``None`` for the rest of its share, with a warning.
 
     Raises:
       ValueError: bad arguments; with ``processes``, processes given different problems.
@@ -444,15 +445,18 @@ def fold_batch(
     finally:
         if bar is not None:
             bar.close()
+    stopped = []  # the other processes that were interrupted
     if processes:
         try:
-            _gather_results(results, patterns, wait=not interrupted)
+            stopped = _gather_results(results, patterns, interrupted)
         except KeyboardInterrupt:
             interrupted = True
-    if interrupted:
+    if interrupted or stopped:
         done = sum(r is not None for r in results)
+        who = "" if interrupted else f" in process{'es' * (len(stopped) > 1)} {stopped}"
         warnings.warn(
-            f"fold_batch() interrupted: {done} of {n} problems have results, the rest are None",
+            f"fold_batch() interrupted{who}: {done} of {n} problems have results, the rest are "
+            "None",
             RuntimeWarning,
             stacklevel=2,
         )
@@ -484,21 +488,27 @@ def _check_same_problems(members, solver: Solver, dtype, max_iter, max_time, sha
         )
 
 
-def _gather_results(results: list, patterns: list[CreasePattern], wait: bool) -> None:
-    """Fill ``results`` with the other processes' (each folded a share of them; ``wait``
-    False: only hand them this process's). Results travel without their pattern, which every
-    process has: each result gets its own process's pattern object back, as folded there."""
+def _gather_results(results: list, patterns: list[CreasePattern], interrupted: bool) -> list:
+    """Fill ``results`` with the other processes' (each folded a share of them; this one
+    ``interrupted``: only hand them its own, without waiting); the other processes that were
+    interrupted. Results travel without their pattern, which every process has: each result
+    gets its own process's pattern object back, as if folded there."""
     mine = [(k, replace(r, pattern=None)) for k, r in enumerate(results) if r is not None]
-    parts = all_gather(pickle.dumps(("results", mine), protocol=5), wait=wait)
+    kind = "interrupted" if interrupted else "results"
+    parts = all_gather(pickle.dumps((kind, mine), protocol=5), wait=not interrupted)
+    stopped = []
     for process, part in enumerate(parts):
         if part is None or process == jax.process_index():
             continue
         kind, payload = pickle.loads(part)  # from a process of this run: trusted
         if kind == "failed":
             raise RuntimeError(f"fold_batch(): process {process} failed: {payload}")
+        if kind == "interrupted":
+            stopped.append(process)
         for k, r in payload:
             r.pattern = patterns[k]
             results[k] = r
+    return stopped
 
 
 def _stack(*trees):

@@ -37,7 +37,7 @@ PROBLEMS = textwrap.dedent(
 
 WORKER = PROBLEMS + textwrap.dedent(
     """
-    import pickle, sys
+    import pickle, sys, warnings
     import jax
 
     me, port, out = int(sys.argv[1]), sys.argv[2], sys.argv[3]
@@ -71,6 +71,17 @@ WORKER = PROBLEMS + textwrap.dedent(
         fold_batch(cps, percent=percents[:-1] + [0.4 + 0.1 * me], progress=False)
     except ValueError as e:
         found["mismatch"] = str(e)
+    # Ctrl-C in process 1 before it folds anything: it returns at once, process 0 with its
+    # own share
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    batch._run_group = interrupted if me == 1 else run_group
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        done = fold_batch(cps, percent=percents, progress=False)
+    found["interrupted"] = ([r is not None for r in done], [str(w.message) for w in caught])
+    batch._run_group = run_group
     # the other process's device: refused (before any exchange)
     try:
         fold_batch(cps, devices=jax.devices(), progress=False)
@@ -141,6 +152,11 @@ def _problems() -> dict:
     return space
 
 
+def _queue_order(cps: list, percents: list) -> list[int]:
+    """The problems' indices in fold_batch's queue order: those that fold furthest first."""
+    return sorted(range(len(cps)), key=lambda k: -percents[k] * max(abs(cps[k].mesh.target)))
+
+
 def _assert_same(got: list, want: list, cps: list, percents: list) -> None:
     """``got`` (from a process) equals ``want`` (this process's fold_batch), in input order."""
     assert len(got) == len(want) == len(cps)
@@ -161,8 +177,8 @@ def test_every_process_returns_every_result_in_input_order(two_processes):
     want = fold_batch(cps, percent=percents, progress=False)
     for found in two_processes:
         _assert_same(found["mixed"], want, cps, percents)
-    # each folded half of them, every other one in queue order (the furthest folds first)
-    order = sorted(range(len(cps)), key=lambda k: -percents[k] * max(abs(cps[k].mesh.target)))
+    # each folded half of them, every other one in queue order
+    order = _queue_order(cps, percents)
     for me, found in enumerate(two_processes):
         assert found["folded mixed"] == sorted(order[me::2])
 
@@ -187,6 +203,19 @@ def test_processes_false_folds_alone(two_processes):
 def test_processes_given_other_problems_refuse(two_processes):
     for found in two_processes:
         assert "processes [1] were given other problems" in found["mismatch"]
+
+
+def test_an_interrupted_process_hands_on_what_it_has(two_processes):
+    cps, percents = _problems()["mixed"]()
+    order = _queue_order(cps, percents)
+    done, caught = two_processes[0]["interrupted"]
+    assert done == [k in order[0::2] for k in range(len(cps))]
+    assert caught == [
+        "fold_batch() interrupted in process [1]: 3 of 6 problems have results, the rest are None"
+    ]
+    done, caught = two_processes[1]["interrupted"]
+    assert done == [False] * len(cps)
+    assert caught == ["fold_batch() interrupted: 0 of 6 problems have results, the rest are None"]
 
 
 def test_another_process_devices_refused(two_processes):
