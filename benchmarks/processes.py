@@ -186,6 +186,9 @@ def main(out: Path, quick: bool = False) -> list[dict]:
                 first[setup.label, lines[0]["set"]] = lines
                 print(setup.label, lines, flush=True)
         timed: dict = {}
+        # other processes on this machine slow the setups unevenly (one of two pinned
+        # processes, say): the load is reported
+        load = [os.getloadavg()[0]]
         for k in range(rounds):
             for name in SETS:
                 for setup in setups:
@@ -193,6 +196,7 @@ def main(out: Path, quick: bool = False) -> list[dict]:
                     lines = setup.read()
                     timed.setdefault((setup.label, name), []).append(lines)
                     print(k, setup.label, name, f"{max(x['seconds'] for x in lines):.3f} s")
+        load.append(os.getloadavg()[0])
     finally:
         for setup in setups:
             setup.close()
@@ -228,6 +232,8 @@ def main(out: Path, quick: bool = False) -> list[dict]:
                     "exchange_s": float(np.median(exchange)) if len(setup.cores) > 1 else 0.0,
                     "payload_bytes": max(x["payload"] for x in runs[-1]),
                     "max_position_diff": diff,
+                    "load_before": load[0],
+                    "load_after": load[1],
                 }
             )
     write(rows, out, cpu_name())
@@ -253,7 +259,9 @@ def write(rows: list[dict], out: Path, cpu: str) -> None:
         " the range in brackets; a round of two processes lasts until the slower returns (the"
         " exchange of results included). Exchange: an all_gather of one process's results"
         " alone, timed apart. Position diff: largest difference between the two setups'"
-        " results.",
+        f" results. The machine's load average (1 min) was {rows[0]['load_before']:.1f} as the"
+        f" timed rounds began and {rows[0]['load_after']:.1f} as they ended (the setups' own"
+        " processes included: 1 to 2).",
         "",
         "| set | setup | converged | mean iterations | compile (s) | batch (s) |"
         " folds/s | exchange (ms) | results sent (kB) | max position diff |",

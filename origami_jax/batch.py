@@ -35,8 +35,8 @@ host say) each folds a share on its own devices and every process returns all th
 (:mod:`origami_jax.processes` carries them). Each call runs about a tenth of a second of
 iterations; the next one is dispatched before the host reads the results of the last, shows
 progress and hands the finished problems on; an interrupted batch (Ctrl-C) returns the problems
-already done. Few slots suit CPUs (:data:`CPU_SLOTS`, 32 per device: one device's slots stay in its
-caches) (measured: docs/design-notes/measurements.md).
+already done. Few slots suit CPUs (:data:`CPU_SLOTS`, 32 per device: one device's slots stay in
+its caches) (measured: docs/design-notes/measurements.md).
 
 Example:
   >>> from origami_jax import fold_batch, patterns
@@ -321,11 +321,11 @@ def fold_batch(
         parameter sets, ``True`` for every topology, ``False`` never (size buckets only).
       processes: share the problems among the processes of a run started with
         ``jax.distributed.initialize`` (one per host, say): each folds its share on its own
-        devices, and every process returns all the results. ``None`` (default): when there
-        are several processes (``jax.process_count() > 1``); ``False``: this process folds
-        all the problems it was given, alone. Shared, the call is a collective: every
-        process calls it with the same problems and options, in the same order of calls (a
-        process given other problems raises ``ValueError`` in all of them).
+        devices, and every process returns all the results. ``None`` (default) or ``True``:
+        whenever there are several processes (``jax.process_count() > 1``); ``False``: this
+        process folds all the problems it was given, alone. Shared, the call is a collective:
+        every process calls it with the same problems and options, in the same order of calls
+        (a process given other problems raises ``ValueError`` in all of them).
 
     Returns:
       A list in input order. A problem's result equals folding it alone (to the rounding of a
