@@ -168,7 +168,7 @@ def main(out: Path, quick: bool = False) -> list[dict]:
     if len(cores) < 2:
         raise SystemExit("this comparison needs 2 cores (it runs on the first two)")
     a, b = cores[:2]
-    n, rounds = (256, 2) if quick else (1024, 5)
+    n, rounds = (256, 2) if quick else (1024, 9)
     tmp = out / ".processes"
     tmp.mkdir(parents=True, exist_ok=True)
     setups: list[Setup] = []
@@ -187,8 +187,9 @@ def main(out: Path, quick: bool = False) -> list[dict]:
                 print(setup.label, lines, flush=True)
         timed: dict = {}
         # other processes on this machine slow the setups unevenly (one of two pinned
-        # processes, say): the load is reported
-        load = [os.getloadavg()[0]]
+        # processes, say): the cores they used during the rounds are reported
+        pids = [p.pid for setup in setups for p in setup.procs]
+        t0, busy0 = time.perf_counter(), _cpu_seconds(pids)
         for k in range(rounds):
             for name in SETS:
                 for setup in setups:
@@ -196,7 +197,10 @@ def main(out: Path, quick: bool = False) -> list[dict]:
                     lines = setup.read()
                     timed.setdefault((setup.label, name), []).append(lines)
                     print(k, setup.label, name, f"{max(x['seconds'] for x in lines):.3f} s")
-        load.append(os.getloadavg()[0])
+        busy1 = _cpu_seconds(pids)
+        others = None
+        if busy0 and busy1:  # all processes' CPU time less the setups' own, per second
+            others = ((busy1[0] - busy0[0]) - (busy1[1] - busy0[1])) / (time.perf_counter() - t0)
     finally:
         for setup in setups:
             setup.close()
@@ -232,8 +236,7 @@ def main(out: Path, quick: bool = False) -> list[dict]:
                     "exchange_s": float(np.median(exchange)) if len(setup.cores) > 1 else 0.0,
                     "payload_bytes": max(x["payload"] for x in runs[-1]),
                     "max_position_diff": diff,
-                    "load_before": load[0],
-                    "load_after": load[1],
+                    "other_processes_cores": others,
                 }
             )
     write(rows, out, cpu_name())
@@ -241,6 +244,33 @@ def main(out: Path, quick: bool = False) -> list[dict]:
         path.unlink()
     tmp.rmdir()
     return rows
+
+
+def _cpu_seconds(pids: list[int]) -> tuple[float, float] | None:
+    """CPU seconds used so far by all the machine's processes (``/proc/stat``) and by the
+    processes ``pids`` (``/proc/PID/stat``); ``None`` where these files are missing."""
+    try:
+        hz = os.sysconf("SC_CLK_TCK")
+        with open("/proc/stat") as f:
+            fields = [int(x) for x in f.readline().split()[1:]]
+        busy = sum(fields) - fields[3] - fields[4]  # all but idle and iowait
+        mine = 0
+        for pid in pids:
+            with open(f"/proc/{pid}/stat") as f:
+                stat = f.read().rsplit(")", 1)[1].split()
+            mine += int(stat[11]) + int(stat[12])  # utime, stime
+        return busy / hz, mine / hz
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _others_line(cores: float | str | None) -> str:
+    if cores in (None, ""):  # not measured (no /proc)
+        return ""
+    return (
+        f" Other processes on this shared machine used {float(cores):.2f} of its 2 cores on average"
+        " during the timed rounds."
+    )
 
 
 def write(rows: list[dict], out: Path, cpu: str) -> None:
@@ -259,9 +289,7 @@ def write(rows: list[dict], out: Path, cpu: str) -> None:
         " the range in brackets; a round of two processes lasts until the slower returns (the"
         " exchange of results included). Exchange: an all_gather of one process's results"
         " alone, timed apart. Position diff: largest difference between the two setups'"
-        f" results. The machine's load average (1 min) was {rows[0]['load_before']:.1f} as the"
-        f" timed rounds began and {rows[0]['load_after']:.1f} as they ended (the setups' own"
-        " processes included: 1 to 2).",
+        " results." + _others_line(rows[0]["other_processes_cores"]),
         "",
         "| set | setup | converged | mean iterations | compile (s) | batch (s) |"
         " folds/s | exchange (ms) | results sent (kB) | max position diff |",
@@ -274,7 +302,7 @@ def write(rows: list[dict], out: Path, cpu: str) -> None:
             f"{float(r['mean_iterations']):.1f} | {float(r['compile_time_s']):.1f} | "
             f"{float(r['batch_time_s']):.3f} | {float(r['folds_per_s']):.0f} "
             f"({float(r['folds_per_s_min']):.0f}-{float(r['folds_per_s_max']):.0f}) | "
-            f"{1e3 * float(r['exchange_s']):.1f} | "
+            + (f"{1e3 * float(r['exchange_s']):.1f} | " if two else "- | ")
             + (f"{float(r['payload_bytes']) / 1e3:.0f}" if two else "-")
             + f" | {float(r['max_position_diff']):.1e} |"
         )
