@@ -30,11 +30,13 @@ result out and take the next problem of the queue (continuous batching: no slot 
 slowest member of a chunk, nor for the host). The queue takes the problems that fold furthest
 first (:func:`_fold_extents`): slots of like problems waste less of each vmapped iteration, and
 the last problems to enter finish quickly. With several devices the slots and the queue are
-split across them (``jax.shard_map``). Each call runs about a tenth of a second of iterations;
-the next one is dispatched before the host reads the results of the last, shows progress and
-hands the finished problems on; an interrupted batch (Ctrl-C) returns the problems already
-done. Few slots suit CPUs (:data:`CPU_SLOTS`, 32 per device: one device's slots stay in its
-caches) (measured: docs/design-notes/measurements.md).
+split across them (``jax.shard_map``); with several processes (``jax.distributed``, one per
+host say) each folds a share on its own devices and every process returns all the results
+(:mod:`origami_jax.processes` carries them). Each call runs about a tenth of a second of
+iterations; the next one is dispatched before the host reads the results of the last, shows
+progress and hands the finished problems on; an interrupted batch (Ctrl-C) returns the problems
+already done. Few slots suit CPUs (:data:`CPU_SLOTS`, 32 per device: one device's slots stay in
+its caches) (measured: docs/design-notes/measurements.md).
 
 Example:
   >>> from origami_jax import fold_batch, patterns
@@ -46,6 +48,8 @@ Example:
 
 from __future__ import annotations
 
+import hashlib
+import pickle
 import time
 import warnings
 from collections import Counter, deque
@@ -86,6 +90,7 @@ from origami_jax.padding import (
     unpad_metrics,
 )
 from origami_jax.pattern import CreasePattern, PatternError
+from origami_jax.processes import all_gather
 from origami_jax.progress import ProgressBar
 from origami_jax.solvers import Solver, Status, get_solver
 from origami_jax.solvers.base import (
@@ -290,6 +295,7 @@ def fold_batch(
     progress: bool | None = None,
     max_time: float | None = None,
     share_topology: bool | None = None,
+    processes: bool | None = None,
 ) -> list[FoldResult | None]:
     """Fold many problems in vmapped, compiled solves; one :class:`FoldResult` per problem.
 
@@ -306,12 +312,20 @@ def fold_batch(
       chunk_size: problems solved at once, the slots of a compiled solve (default
         :data:`CPU_SLOTS` per CPU device, :data:`SLOTS` per other device, fewer for large
         Newton problems); rounded to a multiple of the device count.
-      devices: the devices to split the slots across (default all of JAX's default backend).
+      devices: the devices to split the slots across (default all of this process's devices
+        of JAX's default backend, ``jax.local_devices()``).
       progress: show problems done / total on stderr (default: once a batch has run 2 s).
       share_topology: vmap problems of one topology unpadded with shared index arrays
         (faster; compiled once per topology): ``None`` (default) for a topology with at
         least :data:`SHARED_TOPOLOGY_MIN` problems or one pattern given for several
         parameter sets, ``True`` for every topology, ``False`` never (size buckets only).
+      processes: share the problems among the processes of a run started with
+        ``jax.distributed.initialize`` (one per host, say): each folds its share on its own
+        devices, and every process returns all the results. ``None`` (default) or ``True``:
+        whenever there are several processes (``jax.process_count() > 1``); ``False``: this
+        process folds all the problems it was given, alone. Shared, the call is a collective:
+        every process calls it with the same problems and options, in the same order of calls
+        (a process given other problems raises ``ValueError`` in all of them).
 
     Returns:
       A list in input order. A problem's result equals folding it alone (to the rounding of a
@@ -322,7 +336,14 @@ def fold_batch(
       limit the two can stop at different points). When interrupted (KeyboardInterrupt),
       the list holds the results of the problems already done and ``None`` for the rest,
       with a warning; the problems that fold furthest are taken first (:func:`_fold_extents`),
-      so those are the ones done.
+      so those are the ones done. Shared among processes, an interrupted process hands the
+      others the results it has and returns at once (``None`` for the others' shares); the
+      others return them, ``None`` for the rest of its share, with a warning.
+
+    Raises:
+      ValueError: bad arguments; with ``processes``, processes given different problems.
+      RuntimeError: with ``processes``, another process failed (its error is named), or JAX's
+        distributed runtime cannot be reached (see :mod:`origami_jax.processes`).
     """
     one_pattern = isinstance(patterns, CreasePattern)
     if one_pattern:
@@ -354,7 +375,16 @@ def fold_batch(
             raise PatternError(f"percent {k}: must be finite, got {pc}")
     stiffnesses = _per_problem(stiffness, n, "stiffness")
     start_list = [None] * n if starts is None else _per_problem(list(starts), n, "starts")
-    devices = list(devices) if devices is not None else jax.devices()
+    devices = list(devices) if devices is not None else jax.local_devices()
+    foreign = [d for d in devices if d.process_index != jax.process_index()]
+    if foreign:
+        raise ValueError(
+            f"fold_batch(): devices {foreign} belong to other processes; each process folds on "
+            "its own (jax.local_devices())"
+        )
+    if processes is None:
+        processes = jax.process_count() > 1
+    processes = bool(processes) and jax.process_count() > 1
 
     members = _members(patterns, percents, stiffnesses, start_list, tol)
     count = Counter(m.topology for m in members)
@@ -369,6 +399,13 @@ def fold_batch(
         groups.setdefault(key, []).append(m)
     for to, _ in groups:
         solver_obj.check_batch(to.vertices)
+    if processes:
+        _check_same_problems(members, solver_obj, dtype, max_iter, max_time, share_topology)
+        # each process takes every P-th problem of each group in queue order (those that fold
+        # furthest first), so every process gets as many of the long ones as of the short
+        me, count_processes = jax.process_index(), jax.process_count()
+        groups = {key: _queue_order(group)[me::count_processes] for key, group in groups.items()}
+        groups = {key: group for key, group in groups.items() if group}
     plan = []
     for (to, topology), group in groups.items():
         size = _chunk_size(chunk_size, len(group), solver_obj, to, devices)
@@ -377,7 +414,8 @@ def fold_batch(
     results: list[FoldResult | None] = [None] * n
     bar = None
     if progress is not False:
-        bar = ProgressBar(n, delay=0.0 if progress else 2.0, unit="problems")
+        mine = sum(len(group) for _, group, _, _ in plan)
+        bar = ProgressBar(mine, delay=0.0 if progress else 2.0, unit="problems")
     t_start = time.perf_counter()
     solved, compiling = [0], [0.0]
 
@@ -392,22 +430,85 @@ def fold_batch(
             rate = solved[0] / max(time.perf_counter() - t_start - compiling[0], 1e-9)
             bar.update(solved[0], f"{rate:.0f}/s")
 
+    interrupted = False
     try:
         for to, group, size, shared in plan:
             _run_group(
                 group, to, size, shared, solver_obj, dtype, devices, max_iter, max_time, finish
             )
     except KeyboardInterrupt:
-        warnings.warn(
-            f"fold_batch() interrupted: {solved[0]} of {n} problems have results, the rest "
-            "are None",
-            RuntimeWarning,
-            stacklevel=2,
-        )
+        interrupted = True
+    except BaseException as e:
+        if processes:  # the others would wait for this process's share: tell them why not
+            all_gather(pickle.dumps(("failed", f"{type(e).__name__}: {e}")), wait=False)
+        raise
     finally:
         if bar is not None:
             bar.close()
+    stopped = []  # the other processes that were interrupted
+    if processes:
+        try:
+            stopped = _gather_results(results, patterns, interrupted)
+        except KeyboardInterrupt:
+            interrupted = True
+    if interrupted or stopped:
+        done = sum(r is not None for r in results)
+        who = "" if interrupted else f" in process{'es' * (len(stopped) > 1)} {stopped}"
+        warnings.warn(
+            f"fold_batch() interrupted{who}: {done} of {n} problems have results, the rest are "
+            "None",
+            RuntimeWarning,
+            stacklevel=2,
+        )
     return results
+
+
+def _queue_order(group: list[_Member]) -> list[_Member]:
+    """The order in which :func:`_run_group` queues a group's problems: those that fold
+    furthest first (:func:`_fold_extents`), ties in input order."""
+    return sorted(group, key=lambda m: m.extent, reverse=True)
+
+
+def _check_same_problems(members, solver: Solver, dtype, max_iter, max_time, share) -> None:
+    """Raise ValueError in every process unless every process was given the same problems
+    and options (a digest of each process's, exchanged: each folds a share of the list)."""
+    digest = hashlib.sha256(repr((solver.name, dtype.name, max_iter, max_time, share)).encode())
+    for m in members:
+        p, mesh = m.problem, m.pattern.mesh
+        arrays = (mesh.vertices, mesh.edges, mesh.target, p.start, p.params.percent, p.tol)
+        for a in (*arrays, *jax.tree.leaves(p.params.stiffness)):
+            digest.update(np.ascontiguousarray(a).tobytes())
+    digests = all_gather(digest.digest())
+    others = [k for k, d in enumerate(digests) if d != digests[0]]
+    if others:
+        raise ValueError(
+            f"fold_batch(): processes {others} were given other problems or options than "
+            "process 0; shared among processes, every process calls fold_batch with the same "
+            "ones (processes=False: each process folds its own problems, alone)"
+        )
+
+
+def _gather_results(results: list, patterns: list[CreasePattern], interrupted: bool) -> list:
+    """Fill ``results`` with the other processes' (each folded a share of them; this one
+    ``interrupted``: only hand them its own, without waiting); the other processes that were
+    interrupted. Results travel without their pattern, which every process has: each result
+    gets its own process's pattern object back, as if folded there."""
+    mine = [(k, replace(r, pattern=None)) for k, r in enumerate(results) if r is not None]
+    kind = "interrupted" if interrupted else "results"
+    parts = all_gather(pickle.dumps((kind, mine), protocol=5), wait=not interrupted)
+    stopped = []
+    for process, part in enumerate(parts):
+        if part is None or process == jax.process_index():
+            continue
+        kind, payload = pickle.loads(part)  # from a process of this run: trusted
+        if kind == "failed":
+            raise RuntimeError(f"fold_batch(): process {process} failed: {payload}")
+        if kind == "interrupted":
+            stopped.append(process)
+        for k, r in payload:
+            r.pattern = patterns[k]
+            results[k] = r
+    return stopped
 
 
 def _stack(*trees):
@@ -857,7 +958,7 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
     # difficulty side by side (under vmap each iteration runs its slots' longest line search,
     # and the curvature terms for any member's exact attempt), and the last ones to enter,
     # whose slots see no refill, are quick
-    remaining = deque(sorted(group, key=lambda m: m.extent, reverse=True))
+    remaining = deque(_queue_order(group))
     lanes = None
     init = jax.vmap(solver.init, in_axes=(axes,))
     per_step = None
