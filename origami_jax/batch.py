@@ -506,8 +506,7 @@ def _gather_results(results: list, patterns: list[CreasePattern], interrupted: b
         if kind == "interrupted":
             stopped.append(process)
         for k, r in payload:
-            r.pattern = patterns[k]
-            results[k] = r
+            results[k] = replace(r, pattern=patterns[k])
     return stopped
 
 
