@@ -9,8 +9,8 @@ and the command line (``origami-jax``) and the benchmarks call it:
 * **malloc** (:func:`origami_jax.memory.keep_freed_memory`): glibc's ``malloc`` keeps large
   freed blocks in its heap instead of unmapping them, so a Newton iteration on a large sheet
   stops paying the page faults of fresh buffers (about a fifth faster on a 100 x 100
-  Miura-ori); the process keeps its peak heap. Or set ``MALLOC_MMAP_THRESHOLD_`` and
-  ``MALLOC_TRIM_THRESHOLD_`` before Python starts.
+  Miura-ori, a tenth on a 316 x 316); the process keeps its peak heap. Or set
+  ``MALLOC_MMAP_THRESHOLD_`` and ``MALLOC_TRIM_THRESHOLD_`` before Python starts.
 * **OpenBLAS kernels** (:func:`origami_jax.solvers.hostsparse.tune`, ``openblas_kernels``):
   cvxopt's wheels bundle an OpenBLAS too old to know recent CPUs, which then runs its slowest
   kernels (CHOLMOD about twice as slow). Opted in, cvxopt is loaded with this CPU's kernels

@@ -427,6 +427,33 @@ def test_host_sparse_backends_agree_and_fail_cleanly(backend):
         assert re.fullmatch(r"20\d\d(\.\d+)*", hostsparse.mkl_version())
 
 
+@pytest.mark.parametrize("backend", _BACKENDS)
+def test_host_sparse_timings_add_up_the_callbacks_and_the_backend_phases(backend):
+    """``hostsparse.timings()`` (a benchmark's opt-in) counts each callback and each phase of
+    the backend inside its block; outside it nothing is counted, and a block starts at zero."""
+    import origami_jax
+    from origami_jax.solvers import hostsparse
+
+    args, b, exact = _spd_system()
+    with _use_backend(backend):
+        origami_jax.clear_caches()  # the pattern analysed afresh, in the block
+        hostsparse.solve(*args, b)  # not timed
+        origami_jax.clear_caches()
+        with hostsparse.timings() as t:
+            x, ok, token = hostsparse.factor_solve(*args, b, keep=True)
+            again = hostsparse.resolve(token, 2 * b)
+        with hostsparse.timings() as fresh:
+            pass
+    assert ok and np.allclose(x, exact, rtol=1e-10) and np.allclose(again, 2 * exact, rtol=1e-10)
+    assert (t["factor_solve_calls"], t["resolve_calls"]) == (1, 1)
+    assert (t["factorizations"], t["solves"]) == (1, 2)
+    assert t["analyses"] == (0 if backend == "superlu" else 1)  # SuperLU has no separate one
+    assert (t["unknowns"], t["entries"]) == (40, len(args[1]))
+    inside = t["analyse"] + t["factor"] + t["solve"]
+    assert t["factor"] > 0 and t["solve"] > 0 and t["callbacks"] >= inside
+    assert all(v == 0 for v in fresh.values()) and not hostsparse._KEPT
+
+
 def _spd_system():
     """``((indptr, indices, data) of the upper triangle, b, exact solution)`` of a random
     symmetric positive definite 40 x 40 system."""
@@ -617,6 +644,51 @@ def test_sparse_assembly_matches_dense():
         rows = got[np.ix_(order, order)][a : a + 3]
         assert np.abs(np.delete(rows, np.s_[a : a + 3], axis=1)).max() == 0.0
         assert np.abs(rows[:, a : a + 3]).max() > 0.0
+
+
+def test_nested_dissection_is_the_order_its_definition_gives():
+    """The fill-reducing order (NumPy over the adjacency's rows at each split) is the one its
+    definition gives with scipy's slicing: split at the median of the longer side, the left
+    half's vertices that touch the right half last, each half in turn; on a Miura-ori and on a
+    jittered sheet with an adjacency of weighted and explicitly zero (no) entries."""
+    import scipy.sparse as sp
+
+    from origami_jax.solvers.hessian_layout import hessian_elements, nested_dissection
+
+    def definition(xy, adjacency, leaf=16):
+        out = []
+
+        def visit(idx):
+            if len(idx) <= leaf:
+                return out.append(idx)
+            p = xy[idx]
+            axis = int(np.argmax(p.max(axis=0) - p.min(axis=0)))
+            below = p[:, axis] <= np.median(p[:, axis])
+            left, right = idx[below], idx[~below]
+            if len(left) == 0 or len(right) == 0:
+                return out.append(idx)
+            touches = np.asarray((adjacency[left][:, right] != 0).sum(axis=1)).ravel() > 0
+            visit(left[~touches])
+            visit(right)
+            out.append(left[touches])
+
+        visit(np.arange(len(xy)))
+        return np.concatenate(out)
+
+    rng = np.random.default_rng(7)
+    for cp in (patterns.miura_ori(12, 9), patterns.miura_ori(1, 1)):
+        mesh = cp.mesh
+        elements = [np.asarray(e) for e in hessian_elements(make_structure(mesh))]
+        rows = np.concatenate([np.repeat(e, e.shape[1], axis=1).ravel() for e in elements])
+        cols = np.concatenate([np.tile(e, (1, e.shape[1])).ravel() for e in elements])
+        v = mesh.num_vertices
+        weights = rng.choice([0.0, 1.0, 2.5], size=len(rows))
+        for xy in (mesh.vertices[:, :2], mesh.vertices[:, :2] + 0.01 * rng.normal(size=(v, 2))):
+            for w in (np.ones(len(rows)), weights):
+                adjacency = sp.coo_matrix((w, (rows, cols)), shape=(v, v)).tocsr()
+                order = nested_dissection(xy, adjacency, leaf=4)
+                assert np.array_equal(np.sort(order), np.arange(v))
+                np.testing.assert_array_equal(order, definition(xy, adjacency, leaf=4))
 
 
 def test_block_sparse_solve_matches_dense():

@@ -32,6 +32,9 @@ solve (or the first call that asks about backends), not when the package is impo
 Nothing here changes a process-wide setting unless asked to by :func:`tune` (the OpenBLAS
 kernels above; MKL's OpenMP threads not spinning after each PARDISO call).
 
+:func:`timings` (an opt-in for benchmarks) adds up the seconds spent in the callbacks and in
+each backend's analysis, factorizations and solves inside a ``with`` block.
+
 A factorization can be kept for a second right-hand side (Newton's geodesic acceleration):
 :func:`factor_solve` with ``keep=True`` returns a token, and :func:`resolve` solves with it
 once and releases it. Nothing here raises: a matrix that does not factor gives ``ok=False``
@@ -48,8 +51,10 @@ import os
 import platform
 import sys
 import threading
+import time
 import warnings
 from collections import OrderedDict
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -286,12 +291,68 @@ __all__ = [
     "solve",
     "superlu",
     "symmetric_matrix",
+    "timings",
     "tune",
     "using",
 ]
 
 _KEPT_MAX = 4096  # kept factorizations never released (an interrupted solve) are dropped
 _SPARE = 2  # released factors a pattern keeps for reuse (each holds a numeric factorization)
+
+# seconds and counts collected by timings() (None: off, the default: no clock is read)
+_TIMES: dict[str, float] | None = None
+
+
+@contextlib.contextmanager
+def timings() -> Iterator[dict[str, float]]:
+    """Add up where the host's sparse solves spend their time inside the ``with`` block (an
+    opt-in for benchmarks; off, nothing is timed). Yields a dict, filled as the callbacks run:
+
+    * ``callbacks``: seconds inside :func:`factor_solve` and :func:`resolve` (what JAX's host
+      callbacks run, their arguments already on the host), ``factor_solve_calls`` and
+      ``resolve_calls`` how many of each;
+    * ``analyse``: the backend's symbolic analysis (PARDISO's phase 11, CHOLMOD's ``symbolic``;
+      once per pattern and factor object), ``analyses`` how many;
+    * ``factor``: numeric factorizations (SuperLU's whole ``splu``), ``factorizations``;
+    * ``solve``: triangular solves, ``solves``;
+    * ``unknowns`` and ``entries``: the size of the last matrix factored (rows, stored entries).
+
+    The rest of ``callbacks`` is the callbacks' own work (checks, copies, the pattern's look-up).
+    Not thread-safe against another ``timings`` block; the callbacks themselves hold a lock.
+
+    Example:
+      >>> from origami_jax.solvers import hostsparse
+      >>> with hostsparse.timings() as t:
+      ...     pass  # fold(...) here
+      >>> t["callbacks"]
+      0.0
+    """
+    global _TIMES
+    keys = ("callbacks", "analyse", "factor", "solve")
+    counts = ("factor_solve_calls", "resolve_calls", "analyses", "factorizations", "solves")
+    counts += ("unknowns", "entries")
+    times: dict[str, float] = {**dict.fromkeys(keys, 0.0), **dict.fromkeys(counts, 0)}
+    saved, _TIMES = _TIMES, times
+    try:
+        yield times
+    finally:
+        _TIMES = saved
+
+
+@contextlib.contextmanager
+def _timed(key: str, count: str | None = None):
+    """Add the block's seconds to ``_TIMES[key]`` (and one to ``count``) while timings() is on."""
+    times = _TIMES
+    if times is None:
+        yield
+        return
+    start = time.perf_counter()
+    try:
+        yield
+    finally:
+        times[key] += time.perf_counter() - start
+        if count is not None:
+            times[count] += 1
 
 
 def backend() -> str:
@@ -447,16 +508,21 @@ class _Pardiso(_Pattern):
         values = np.array(data, np.float64, order="C")  # kept: the solves are given it too
         if not handle.analysed:
             handle.analysed = True  # from here on its memory is released with it
-            if handle.call(11, values)[1] != 0:
+            with _timed("analyse", "analyses"):
+                analysed = handle.call(11, values)[1] == 0
+            if not analysed:
                 return None
-        if handle.call(22, values)[1] != 0:
+        with _timed("factor", "factorizations"):
+            factored = handle.call(22, values)[1] == 0
+        if not factored:
             self.release(handle)
             return None
         handle.values = values
         return handle
 
     def solve(self, handle: _PardisoFactor, rhs: np.ndarray) -> np.ndarray:
-        x, error = handle.call(33, handle.values, rhs)
+        with _timed("solve", "solves"):
+            x, error = handle.call(33, handle.values, rhs)
         return x if error == 0 else np.full_like(x, np.nan)
 
 
@@ -484,10 +550,12 @@ class _Cholmod(_Pattern):
             if self.free:
                 symbolic = self.free.pop()
             else:
-                symbolic = self.lib.symbolic(self.matrix, p=self.identity)
+                with _timed("analyse", "analyses"):
+                    symbolic = self.lib.symbolic(self.matrix, p=self.identity)
             self.matrix.V = _cvx_matrix(np.ascontiguousarray(data, np.float64))
             try:
-                self.lib.numeric(self.matrix, symbolic)
+                with _timed("factor", "factorizations"):
+                    self.lib.numeric(self.matrix, symbolic)
             except ArithmeticError:  # not positive definite
                 self.release(symbolic)
                 return None
@@ -495,7 +563,7 @@ class _Cholmod(_Pattern):
 
     def solve(self, numeric, rhs: np.ndarray) -> np.ndarray:
         b = _cvx_matrix(np.array(rhs, np.float64))
-        with _cholmod_options(self.lib):
+        with _cholmod_options(self.lib), _timed("solve", "solves"):
             self.lib.solve(numeric, b)
         return np.asarray(b).ravel()
 
@@ -589,7 +657,8 @@ def _on_superlu_thread(fn, *args):
 
 def _superlu_factor(indptr, indices, data) -> int:
     """(On the SuperLU thread.) The key of the kept factorization, 0 if it does not factor."""
-    found = superlu(indptr, indices, data)
+    with _timed("factor", "factorizations"):
+        found = superlu(indptr, indices, data)
     # without pivoting, U's diagonal is D of L D L^T: all positive iff positive definite
     if found is None or not np.all(found[1] > 0):
         return 0
@@ -600,7 +669,8 @@ def _superlu_factor(indptr, indices, data) -> int:
 
 def _superlu_solve(key: int, rhs: np.ndarray) -> np.ndarray:
     """(On the SuperLU thread.)"""
-    return _SUPERLU[key].solve(rhs)
+    with _timed("solve", "solves"):
+        return _SUPERLU[key].solve(rhs)
 
 
 def _superlu_free(key: int) -> None:
@@ -645,7 +715,9 @@ def factor_solve(indptr, indices, data, rhs, active=True, keep: bool = False):
     rhs = np.asarray(rhs)
     if not np.all(active):
         return np.zeros_like(rhs), np.asarray(False), np.asarray(0, np.int32)
-    with _LOCK:
+    with _LOCK, _timed("callbacks", "factor_solve_calls"):
+        if _TIMES is not None:
+            _TIMES["unknowns"], _TIMES["entries"] = len(indptr) - 1, len(indices)
         return _factor_solve(indptr, indices, data, rhs, keep)
 
 
@@ -669,7 +741,7 @@ def _factor_solve(indptr, indices, data, rhs, keep):
 def resolve(token, rhs):
     """Solve with a kept factorization and release it; NaN for an unknown token."""
     rhs = np.asarray(rhs)
-    with _LOCK:
+    with _LOCK, _timed("callbacks", "resolve_calls"):
         found = _KEPT.pop(int(token), None)
         if found is None:
             return np.full_like(rhs, np.nan)
