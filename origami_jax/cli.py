@@ -120,7 +120,7 @@ def _scene_arguments(p: argparse.ArgumentParser, out_help: str) -> None:
         type=_number(float, "a positive length", 0.0, strict=True),
         metavar="DHAT",
         help="self-contact: faces kept apart by DHAT, pattern units (default without a value: "
-        "1e-3 of the sheet's diameter); Newton only",
+        "1e-3 of the sheet's diameter)",
     )
     _cache_argument(
         p,
@@ -187,7 +187,9 @@ def build_parser() -> argparse.ArgumentParser:
         " MP4 needs ffmpeg or imageio-ffmpeg) (default: <name>.png)",
     )
     r.add_argument(
-        "--color", choices=("strain", "fold_angle_error"), help="colour the faces by this error"
+        "--color",
+        choices=("strain", "fold_angle_error", "contact_force"),
+        help="colour the faces by this error (contact_force: with --contact)",
     )
     r.add_argument(
         "--frames",
@@ -303,6 +305,10 @@ def _render(args, pattern, stiffness) -> int:
         )
     if not out.parent.is_dir():
         raise FileNotFoundError(f"{out}: the folder {out.parent} does not exist")
+    if args.color == "contact_force" and (args.contact is False or suffix in (".gif", ".mp4")):
+        raise ValueError(
+            "--color contact_force: colours a picture (.png, .html) of a --contact fold"
+        )
     # a missing extra or ffmpeg fails before the fold
     viz.require("plotly" if suffix == ".html" else "matplotlib")
     if suffix in (".gif", ".mp4"):

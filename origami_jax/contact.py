@@ -605,6 +605,18 @@ def add_pair_hessians(
     return _within(x, pairs, dhat, lambda few: add(*pair_hessians(x, few, dhat, kappa)))
 
 
+def stiffest_pair(x: Array, pairs: ContactPairs, dhat: Array, kappa: Array) -> Array:
+    """() the largest eigenvalue of any pair's barrier Hessian (its Gauss-Newton part of
+    :func:`pair_hessians`, rank one: its trace), 0 where no pair is within ``dhat``: the
+    barrier's stiffness that an explicit time step must resolve."""
+
+    def largest(corners: Array, blocks: Array) -> Array:
+        trace = jnp.einsum("riijj->r", blocks)
+        return jnp.max(trace, initial=0.0)
+
+    return add_pair_hessians(x, pairs, dhat, kappa, largest)
+
+
 class ContactReport(NamedTuple):
     """The pairs inside the barrier's reach: ``pt_active`` (P,) and ``ee_active`` (Q,) which
     rows, ``num_active`` () how many, ``min_ratio`` () the least distance over ``dhat`` of any

@@ -28,6 +28,7 @@ from origami_jax.caches import LruCache
 from origami_jax.contact import (
     Capacity,
     allocate,
+    contact_energy,
     contact_mesh,
     contact_report,
     contact_stiffness,
@@ -119,8 +120,9 @@ class FoldResult:
     ``frames``: with continuation, the states of the path from flat (:class:`Frame`, one per
     fold percent, the last the result); with self-contact, ``contact_dhat`` its reach (the
     gap layers keep), ``contact_pairs`` the pairs of primitives closer than that at the
-    result and ``contact_min_ratio`` the least distance of any pair over it (``None``, 0 and
-    ``inf`` without contact); ``wall_time`` includes any try whose contact pairs outgrew their
+    result, ``contact_min_ratio`` the least distance of any pair over it and ``contact_kappa``
+    the barrier's weight (``None``, 0, ``inf`` and ``None`` without contact; the forces:
+    :attr:`contact_forces`); ``wall_time`` includes any try whose contact pairs outgrew their
     capacity (its compilation too: the fold starts again with more room).
     Units: radians, seconds, the pattern's length unit.
     """
@@ -152,6 +154,7 @@ class FoldResult:
     contact_dhat: float | None = None
     contact_pairs: int = 0
     contact_min_ratio: float = float("inf")
+    contact_kappa: float | None = None
 
     @functools.cached_property
     def through_pi(self) -> np.ndarray:
@@ -175,6 +178,18 @@ class FoldResult:
         return intersecting_pairs(
             self.positions, self.pattern.mesh.triangles, INTERSECTION_DEPTH * self.pattern.diameter
         )
+
+    @functools.cached_property
+    def contact_forces(self) -> np.ndarray:
+        """(V, 3) the self-contact barrier's force on each vertex at the result (minus its
+        gradient: force units, the stiffness's times length over length); zeros without
+        contact. The pairs within ``contact_dhat`` are found again from the positions."""
+        x = np.asarray(self.positions)
+        if self.contact_dhat is None:
+            return np.zeros_like(x)
+        pairs = allocate(x, contact_mesh(self.pattern.mesh), self.contact_dhat)
+        grad = _contact_gradient(jnp.asarray(x), pairs, self.contact_dhat, self.contact_kappa)
+        return -np.asarray(grad, np.float64)
 
     @property
     def metrics(self) -> dict[str, float]:
@@ -632,8 +647,8 @@ def fold(
         raise ValueError(f"path must be 'auto', 'direct' or 'continuation', got {path!r}")
     if contact is not False and not solver_obj.supports_contact:
         raise ValueError(
-            f"contact: only solver='newton' bounds its steps among contact pairs so far, "
-            f"not {solver_obj.name!r}"
+            f"contact: solver {solver_obj.name!r} does not bound its steps among contact "
+            f"pairs (Solver.supports_contact); newton, lbfgs and dynamics do"
         )
     if contact is not False and contact is not True:
         if not (np.isfinite(float(contact)) and float(contact) > 0):
@@ -903,6 +918,7 @@ def contact_summary(x: np.ndarray, pairs, params: FoldParams) -> dict:
     dhat = float(params.contact.dhat)
     report = contact_report(jnp.asarray(x, params.rest_length.dtype), pairs, dhat)
     return {
+        "contact_kappa": float(params.contact.kappa),
         "contact_dhat": dhat,
         "contact_pairs": int(report.num_active),
         "contact_min_ratio": float(report.min_ratio),
@@ -952,6 +968,10 @@ PATH_FIRST_STEP = 0.125
 PATH_MAX_STEP = 0.25
 PATH_MIN_STEP = 1.0 / 512
 PATH_JUMP = 1.0
+# a step that jumps again to where the last one jumped, at least this fraction as far from
+# halfway there, is taken: the jump does not shrink with the step (a snap-through; a branch
+# turning fast but smoothly turns half as far in half the step)
+PATH_SNAP = 0.75
 PATH_TOL = 1e-6
 PATH_STEP_ITERATIONS = 200
 PATH_EASY_ITERATIONS = 20
@@ -965,6 +985,7 @@ PATH_END = 2.0
 
 # jitted: run op by op, its dozens of small programs would each compile anew for every shape
 _initial_reference = jax.jit(initial_reference)
+_contact_gradient = jax.jit(jax.grad(contact_energy))
 
 
 def _shifted(on_chunk, offset: int, iterations: int, sample: dict) -> None:
@@ -1014,7 +1035,9 @@ def _solve_path(
     started from the last one's state (positions and reference), as paper is folded and as
     Origami Simulator's percent slider does. A step that does not converge, or in which some
     crease turns by more than :data:`PATH_JUMP` (a jump to another branch), is retried at half
-    the size; two easy steps in a row let the next grow.
+    the size; two easy steps in a row let the next grow. A jump that does not shrink when the
+    step is halved (at least :data:`PATH_SNAP` of it, to the same fold percent from halfway) is
+    a snap-through, where the branch followed ends: that step is taken.
 
     On the way the bars and facets are soft, in Origami Simulator's ratios to the crease
     (:data:`PATH_SOFT_AXIAL`, facets as the crease: a sheet that cannot fold rigidly bends and
@@ -1065,6 +1088,7 @@ def _solve_path(
     samples = [_sample(first, m, 0.0)]  # the start, fully driven, as a direct solve's
     watched = np.asarray(structure.hinge_bars)[: structure.num_creases + structure.num_facets]
     done, step, iterations, calm = 0.0, PATH_FIRST_STEP, 0, True
+    jumped = None  # (fraction, jump) of the last step refused for its jump alone
     pace = Pace()  # every step runs the same compiled solve
     while True:
         fraction = min(PATH_END, done + step)
@@ -1112,7 +1136,14 @@ def _solve_path(
         turned = np.abs(angles_k - frames[-1].fold_angles)[watched]
         jump = float(np.max(turned, initial=0.0))
         spent_all = out_of_time or iterations >= max_iter
-        if (converged and jump <= PATH_JUMP) or step <= PATH_MIN_STEP or spent_all:
+        # a step to where the last one jumped that jumps about as far from halfway there: the
+        # branch followed ends in between (a snap-through), and smaller steps would only
+        # close in on that point
+        again = jumped is not None and abs(fraction - jumped[0]) < 1e-12
+        snap = converged and again and jump >= PATH_SNAP * jumped[1]
+        if (converged and jump <= PATH_JUMP) or snap or step <= PATH_MIN_STEP or spent_all:
+            if jumped is not None and fraction >= jumped[0] - 1e-12:
+                jumped = None
             x = np.asarray(xk, np.float64)
             reference = state.reference
             done = fraction
@@ -1134,6 +1165,8 @@ def _solve_path(
                 step = min(PATH_MAX_STEP, 2.0 * step)
             calm = easy
         else:
+            if converged:
+                jumped = (fraction, jump)
             step *= 0.5
             calm = False
     m = dict(m)

@@ -69,6 +69,12 @@ def test_time_limit_exits_1_with_reason(tmp_path, capsys):
         (["fold", "missing.fold"], "missing.fold"),
         (["fold", "--example", "single_crease", "--solver", "nope"], "unknown solver"),
         (["fold", "--example", "single_crease", "--out", "x.xyz"], ".xyz"),
+        (["render", "--example", "single_crease", "--color", "contact_force"], "--contact fold"),
+        (
+            ["render", "--example", "single_crease", "--contact", "--color", "contact_force"]
+            + ["--out", "x.gif"],
+            "colours a picture",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_exit_code_2(argv, message, capsys, tmp_path, monkeypatch):

@@ -22,8 +22,10 @@ from origami_jax.contact import (
     point_triangle_distance_sq,
     step_bound,
 )
+from origami_jax.energy import build_energy
 from origami_jax.intersections import intersecting_pairs
-from origami_jax.solvers import Newton
+from origami_jax.solvers import Lbfgs, Newton
+from origami_jax.viz.colors import face_values
 
 jax.config.update("jax_enable_x64", True)
 
@@ -52,6 +54,32 @@ def test_a_full_valley_stops_at_thickness(linear_solver):
     gap = np.abs((x[[0, 5]] - x[1]) @ normal)
     assert np.all(gap > thick.contact_dhat) and np.all(gap <= 2 * thick.contact_dhat)
     assert "contact" in thick.summary()
+    # the contact forces: equal and opposite over the pairs, and at equilibrium they balance
+    # the springs' (the energy without contact) on every vertex
+    force = thick.contact_forces
+    assert np.abs(force).max() > 0 and np.abs(force.sum(axis=0)).max() < 1e-12
+    springs, params = build_energy(cp)
+    spring_force = -np.asarray(jax.grad(springs)(jnp.asarray(x), params))
+    np.testing.assert_allclose(force + spring_force, 0.0, atol=1e-6 * np.abs(force).max())
+    per_triangle = face_values(thick, "contact_force")
+    assert per_triangle.shape == (len(cp.mesh.triangles),)
+    assert per_triangle.max() == pytest.approx(np.linalg.norm(force, axis=1).max())
+    assert not bare.contact_forces.any()
+
+
+@pytest.mark.parametrize("solver", ["lbfgs", "dynamics"])
+def test_first_order_solvers_stop_where_newton_does(solver):
+    # the same equilibrium, reached with their own step limit (and, for dynamics, a time step
+    # within the barrier's stability limit)
+    cp = patterns.single_crease(fold_angle=np.pi)
+    newton = fold(cp, contact=True)
+    other = fold(cp, solver=solver, contact=True)
+    assert other.converged, other.reason
+    assert len(other.intersections) == 0 and len(other.through_pi) == 0
+    assert other.contact_pairs >= 1 and 0.0 < other.contact_min_ratio <= 1.0
+    shortfall = np.pi - np.abs(other.fold_angles).max()
+    assert 1e-4 < shortfall < 0.01
+    assert shortfall == pytest.approx(np.pi - np.abs(newton.fold_angles).max(), abs=1e-7)
 
 
 T = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -129,8 +157,11 @@ def test_pair_hessians_are_the_barriers_gauss_newton_part():
 
 def test_contact_switches_and_bad_values():
     cp = patterns.single_crease(fold_angle=np.pi)
-    with pytest.raises(ValueError, match="only solver='newton'"):
-        fold(cp, solver="lbfgs", contact=True)
+    class Unbounded(Lbfgs):  # a solver that does not limit its steps among contact pairs
+        supports_contact = False
+
+    with pytest.raises(ValueError, match="does not bound its steps among contact pairs"):
+        fold(cp, solver=Unbounded(), contact=True)
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(ValueError, match="dhat must be finite and > 0"):
             fold(cp, contact=bad)

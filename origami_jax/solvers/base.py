@@ -67,6 +67,7 @@ import numpy as np
 from jax import Array
 
 from origami_jax.barrier import S_MIN
+from origami_jax.contact import step_bound
 from origami_jax.energy import (
     FoldParams,
     Reference,
@@ -567,6 +568,34 @@ def barrier_limit(x: Array, step: Array, problem: Problem, reference: Reference)
     room = jnp.where(closing, BARRIER_APPROACH * jnp.maximum(d, 0.0), 1.0)
     t = room / jnp.where(closing, -rate, 1.0)
     return jnp.minimum(1.0, jnp.min(t, initial=1.0))
+
+
+def with_overflow(status: Array, reference: Reference) -> Array:
+    """``status``, or ``CONTACT_OVERFLOW`` where the contact pairs of ``reference`` outgrew
+    their capacity (the host gathers them again with more room)."""
+    if reference.pairs is None:
+        return status
+    return jnp.where(reference.pairs.did_overflow, Status.CONTACT_OVERFLOW, status)
+
+
+def contact_limit(x: Array, step: Array, problem: Problem, reference: Reference) -> Array:
+    """The largest multiple of ``step`` (positions, (V, 3); at most 1) that keeps every vertex
+    within half the contact skin of ``x``, where the candidate pairs were gathered (so no pair
+    comes within ``dhat`` unseen), and along which no candidate pair closes below a fraction of
+    its distance (:func:`~origami_jax.contact.step_bound`, incremental potential contact's
+    filter: no face passes through a face). 1 in a scene without contact."""
+    pairs = reference.pairs
+    if problem.structure.contact is None or pairs is None:
+        return jnp.ones((), x.dtype)
+    reach = 0.5 * problem.params.contact.skin
+    moved = jnp.max(jnp.sqrt(jnp.sum(step * step, axis=-1)), initial=0.0)
+    t = jnp.minimum(1.0, reach / jnp.maximum(moved, 1e-300))
+    return t * step_bound(x, t * step, pairs)
+
+
+def contact_clear(x: Array, y: Array, problem: Problem, reference: Reference) -> Array:
+    """Whether the straight way from ``x`` to ``y`` passes :func:`contact_limit` whole."""
+    return contact_limit(x, y - x, problem, reference) >= 1.0
 
 
 def stop_closing(v: Array, x: Array, problem: Problem, reference: Reference) -> Array:

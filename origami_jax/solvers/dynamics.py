@@ -38,13 +38,14 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, replace
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from origami_jax.contact import stiffest_pair
 from origami_jax.energy import Reference, springs_only
 from origami_jax.pattern import Mesh
 from origami_jax.solvers.base import (
@@ -54,6 +55,7 @@ from origami_jax.solvers.base import (
     Status,
     accept,
     barrier_limit,
+    contact_limit,
     doubled_areas,
     gauge,
     has_barriers,
@@ -64,6 +66,7 @@ from origami_jax.solvers.base import (
     start_reference,
     stop_closing,
     tolerance_scale,
+    with_overflow,
 )
 
 __all__ = ["Dynamics", "DynamicsState", "max_eigenvalue", "lumped_mass", "origami_simulator"]
@@ -167,6 +170,8 @@ class Dynamics(Solver):
     dt_max_factor: float = 1.0
     patience: int = 5000
     name: str = "dynamics"
+    # it bounds its steps among contact pairs (fold(contact=...))
+    supports_contact: ClassVar[bool] = True
 
     def __post_init__(self):
         for option, allowed in [
@@ -283,7 +288,7 @@ class Dynamics(Solver):
             energy=value,
             grad_max=gmax,
             grad_max0=tolerance_scale(p0, u, reference, gmax),
-            status=status.astype(jnp.int32),
+            status=with_overflow(status, reference).astype(jnp.int32),
             dt=dt,
             dt_stable=dt_stable,
             dt_max=self.dt_max_factor * dt,
@@ -315,6 +320,13 @@ class Dynamics(Solver):
             alpha = jnp.where(uphill, 0.1, jnp.where(grow, 0.99 * alpha, alpha))
             v = jnp.where(uphill, 0.0, mixed)
 
+        if problem.structure.contact is not None:
+            # the contact barrier's stiffness grows without bound as layers close: the time
+            # step stays within its stability limit (the other terms' was taken at the start)
+            c = p.params.contact
+            stiff = stiffest_pair(positions(problem, s.u), s.reference.pairs, c.dhat, c.kappa)
+            dt = jnp.minimum(dt, self.safety * 2.0 / jnp.sqrt(stiff / jnp.min(mass)))
+
         def total_force(f, vel):
             if self.damping == "bar":
                 f = f + self._bar_damping(vel, p, mass[:, 0])
@@ -337,6 +349,11 @@ class Dynamics(Solver):
             # what still closes a barrier fast (one outside its zone) is cut short, with the
             # velocity: no step lands on a wall
             t = barrier_limit(x, gauge(problem, du), p, s.reference)
+            du, v = t * du, t * v
+        if problem.structure.contact is not None:
+            # cut short within the skin and before any face passes through a face, with the
+            # velocity (an inelastic stop)
+            t = contact_limit(x, gauge(problem, du), p, s.reference)
             du, v = t * du, t * v
         u = s.u + du
         if self.integrator == "euler":
@@ -369,7 +386,7 @@ class Dynamics(Solver):
             energy=jnp.where(finite, value, s.energy),
             grad_max=jnp.where(finite, gmax, s.grad_max),
             grad_max0=s.grad_max0,
-            status=status,
+            status=with_overflow(status, reference),
             dt=dt,
             dt_stable=s.dt_stable,
             dt_max=dt_max,

@@ -9,7 +9,7 @@ energy at the current point nor its gradient, so optax's stored value and gradie
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -23,11 +23,15 @@ from origami_jax.solvers.base import (
     Solver,
     Status,
     accept,
+    contact_limit,
+    gauge,
     has_converged,
     next_status,
     objective,
+    positions,
     start_reference,
     tolerance_scale,
+    with_overflow,
 )
 
 __all__ = ["Lbfgs", "LbfgsState"]
@@ -39,6 +43,16 @@ def limit_displacement(max_step) -> optax.GradientTransformation:
     def update(updates, state, params=None):
         largest = jnp.max(jnp.sqrt(jnp.sum(updates * updates, axis=-1)))
         return updates * jnp.minimum(1.0, max_step / jnp.maximum(largest, 1e-300)), state
+
+    return optax.GradientTransformation(lambda params: optax.EmptyState(), update)
+
+
+def limit_by(fraction) -> optax.GradientTransformation:
+    """Scale an update by ``fraction(update)`` (a scalar in [0, 1]): the line search then
+    looks no farther (its largest learning rate is 1)."""
+
+    def update(updates, state, params=None):
+        return updates * fraction(updates), state
 
     return optax.GradientTransformation(lambda params: optax.EmptyState(), update)
 
@@ -73,12 +87,18 @@ class Lbfgs(Solver):
     max_stalls: int = 8
     patience: int = 500
     name: str = "lbfgs"
+    # it bounds its steps among contact pairs (fold(contact=...))
+    supports_contact: ClassVar[bool] = True
 
-    def _optimizer(self, max_step=1.0) -> optax.GradientTransformationExtraArgs:
+    def _optimizer(self, max_step=1.0, fraction=None) -> optax.GradientTransformationExtraArgs:
+        # with contact, ``fraction`` keeps the step within the skin and short of any face (in
+        # the chain either way: the optimizer's state is the same with and without)
+        whole = lambda du: 1.0  # noqa: E731
         return optax.chain(
             optax.scale_by_lbfgs(memory_size=self.memory_size),
             optax.scale(-1.0),
             limit_displacement(max_step),
+            limit_by(whole if fraction is None else fraction),
             optax.scale_by_zoom_linesearch(
                 max_linesearch_steps=self.max_linesearch_steps,
                 max_learning_rate=1.0,
@@ -101,14 +121,21 @@ class Lbfgs(Solver):
             energy=jnp.full((), jnp.inf, u.dtype),
             grad_max=one,
             grad_max0=tolerance_scale(problem, u, reference, g_start),
-            status=jnp.asarray(Status.RUNNING, jnp.int32),
+            status=with_overflow(jnp.asarray(Status.RUNNING, jnp.int32), reference),
             stalls=jnp.zeros((), jnp.int32),
             progress=Progress.start(u.dtype),
         )
 
     def step(self, s: LbfgsState, problem: Problem) -> LbfgsState:
         """One L-BFGS iteration with its line search (pure)."""
-        opt = self._optimizer(problem.max_step)
+        fraction = None
+        if problem.structure.contact is not None:
+            x = positions(problem, s.u)
+
+            def fraction(du):
+                return contact_limit(x, gauge(problem, du), problem, s.reference)
+
+        opt = self._optimizer(problem.max_step, fraction)
 
         def f(u):
             return objective(u, problem, s.reference)
@@ -145,7 +172,7 @@ class Lbfgs(Solver):
             energy=keep(new_value, value),
             grad_max=jnp.where(finite, gmax, jnp.where(first, g_start, s.grad_max)),
             grad_max0=grad_max0,
-            status=status,
+            status=with_overflow(status, reference),
             stalls=stalls,
             progress=progress,
         )

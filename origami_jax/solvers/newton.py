@@ -64,7 +64,6 @@ import numpy as np
 from jax import Array
 
 from origami_jax.barrier import S_MIN
-from origami_jax.contact import step_bound
 from origami_jax.energy import (
     Reference,
     Structure,
@@ -96,6 +95,8 @@ from origami_jax.solvers.base import (
     Solver,
     Status,
     barrier_limit,
+    contact_clear,
+    contact_limit,
     element_floor,
     gauge,
     has_barriers,
@@ -104,6 +105,7 @@ from origami_jax.solvers.base import (
     positions,
     start_reference,
     tolerance_scale,
+    with_overflow,
 )
 from origami_jax.solvers.hessian_layout import (
     UPPER_PAIRS,  # noqa: F401
@@ -411,8 +413,7 @@ class Newton(Solver):
         status = jnp.where(
             ok, jnp.where(gmax == 0, Status.CONVERGED, Status.RUNNING), Status.NONFINITE
         )
-        if reference.pairs is not None:
-            status = jnp.where(reference.pairs.did_overflow, Status.CONTACT_OVERFLOW, status)
+        status = with_overflow(status, reference)
         zero = jnp.zeros((), jnp.int32)
         return NewtonState(
             u=u,
@@ -596,21 +597,10 @@ class Newton(Solver):
                 problem=problem,
                 reference=s.reference,
             )
-        pairs = s.reference.pairs if problem.structure.contact is not None else None
-        if pairs is not None:
-            # no vertex moves farther than half the skin (so no pair comes within dhat unseen),
-            # and no pair closes below a fraction of its distance along the chord to the new
-            # point (so no face passes through a face): incremental potential contact's filter
-            reach = 0.5 * problem.params.contact.skin
-
-            def moved(d):
-                return jnp.max(jnp.sqrt(jnp.sum(d * d, axis=-1)), initial=0.0)
-
-            limit = jnp.minimum(limit, reach / jnp.maximum(moved(step), 1e-300))
-            limit = limit * step_bound(x, limit * step, pairs)
-
-            def clear(y):
-                return (moved(y - x) <= reach) & (step_bound(x, y - x, pairs) >= 1.0)
+        contact = problem.structure.contact is not None
+        if contact:
+            # no vertex moves beyond half the skin, no face through a face (base.contact_limit)
+            limit = limit * contact_limit(x, limit * step, problem, s.reference)
 
         slope = limit * jnp.vdot(s.grad, step)
         ok = ok & (slope < 0)
@@ -624,8 +614,8 @@ class Newton(Solver):
             value = _energy(y, problem.structure, problem.params, s.reference)
             if barriers:  # a point that takes a barrier into its stiff continuation is refused
                 value = jnp.where(feasible(y), value, jnp.inf)
-            if pairs is not None:
-                value = jnp.where(clear(y), value, jnp.inf)
+            if contact:
+                value = jnp.where(contact_clear(x, y, problem, s.reference), value, jnp.inf)
             return value
 
         noise = energy_noise(x, problem, s.reference, s.energy)
@@ -712,8 +702,7 @@ class Newton(Solver):
             _update_reference(positions(problem, u), problem.structure, s.reference),
             s.reference,
         )
-        if reference.pairs is not None:  # the host gathers them again with more room
-            status = jnp.where(reference.pairs.did_overflow, Status.CONTACT_OVERFLOW, status)
+        status = with_overflow(status, reference)
         # exact attempts are shifted once ``shift_after`` of them in a row have failed: 10x more
         # with each further failure, 10x less with each exact step taken
         # (to 0 once below a thousandth of ``shift_min``)

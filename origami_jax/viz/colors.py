@@ -36,7 +36,11 @@ ORDER = "FJUBCVM"
 
 # paper seen from above (front) and from below (back) in the flat pattern's orientation
 PAPER = ("#f1e9d2", "#a9c1df")
-COLOR_LABELS = {"strain": "strain |l/l0 - 1|", "fold_angle_error": "fold-angle error (rad)"}
+COLOR_LABELS = {
+    "strain": "strain |l/l0 - 1|",
+    "fold_angle_error": "fold-angle error (rad)",
+    "contact_force": "contact force",
+}
 
 
 def edge_assignments(pattern: CreasePattern) -> np.ndarray:
@@ -118,7 +122,9 @@ def face_values(
 
     ``quantity``: ``"strain"``, the face's largest bar strain ``max |l / l0 - 1|`` (its sides and
     its triangulation edges); ``"fold_angle_error"``, the largest ``|rho - percent * target|``
-    (radians) of the driven creases around the face (0 for a face without one).
+    (radians) of the driven creases around the face (0 for a face without one);
+    ``"contact_force"`` (a :class:`FoldResult` folded with contact only), per triangle, the
+    largest self-contact force on its corners (:attr:`FoldResult.contact_forces`).
 
     Example:
       >>> import origami_jax as oj
@@ -126,6 +132,11 @@ def face_values(
       >>> face_values(cp.mesh.vertices, "fold_angle_error", cp).round(3)   # flat: error pi/2
       array([1.571, 1.571, 1.571, 1.571])
     """
+    if quantity == "contact_force":
+        if not isinstance(result_or_positions, FoldResult):
+            raise ValueError("color='contact_force' needs a FoldResult (fold(..., contact=True))")
+        force = np.linalg.norm(result_or_positions.contact_forces, axis=1)
+        return force[result_or_positions.pattern.mesh.triangles].max(axis=1)
     pattern, x, angles, pct = unpack(result_or_positions, pattern)
     pct = pct if percent is None else float(percent)
     mesh = pattern.mesh
@@ -141,7 +152,9 @@ def face_values(
             angles = goal / 2 + (raw - goal / 2 + np.pi) % (2 * np.pi) - np.pi
         per_edge = np.where(mesh.role == "driven", np.abs(np.asarray(angles) - goal), 0.0)
     else:
-        raise ValueError(f"color: expected 'strain' or 'fold_angle_error', got {quantity!r}")
+        raise ValueError(
+            f"color: expected 'strain', 'fold_angle_error' or 'contact_force', got {quantity!r}"
+        )
     per_triangle = per_edge[tri_edges].max(axis=1)
     per_face = np.zeros(pattern.num_faces)
     np.maximum.at(per_face, mesh.triangle_face, per_triangle)
@@ -170,7 +183,8 @@ def color_values(color, result_or_positions, pattern, percent):
     values = np.asarray(color, np.float64)
     if values.shape != (len(pattern.mesh.triangles),):
         raise ValueError(
-            f"color: expected 'strain', 'fold_angle_error' or ({len(pattern.mesh.triangles)},) "
+            "color: expected 'strain', 'fold_angle_error', 'contact_force' or "
+            f"({len(pattern.mesh.triangles)},) "
             f"values per mesh triangle, got shape {values.shape}"
         )
     return values, "value"
