@@ -157,6 +157,7 @@ def test_pair_hessians_are_the_barriers_gauss_newton_part():
 
 def test_contact_switches_and_bad_values():
     cp = patterns.single_crease(fold_angle=np.pi)
+
     class Unbounded(Lbfgs):  # a solver that does not limit its steps among contact pairs
         supports_contact = False
 
