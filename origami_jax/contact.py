@@ -119,6 +119,7 @@ __all__ = [
     "allocate",
     "reallocate",
     "update",
+    "refreshed",
     "needs_update",
     "all_pairs",
     "step_bound",
@@ -870,6 +871,19 @@ def update(x: Array, pairs: ContactPairs, mesh: ContactMesh) -> ContactPairs:
     """The pairs built again at ``x`` with ``pairs``' radius and capacity (jittable: for use
     inside a solver's loop when :func:`needs_update`; check ``did_overflow`` after)."""
     return build_pairs(x, mesh, pairs.radius, pairs.capacity)
+
+
+def refreshed(
+    x: Array, pairs: ContactPairs, mesh: ContactMesh, skin: Array | float
+) -> ContactPairs:
+    """``pairs`` built again at ``x`` where some vertex moved more than a quarter of ``skin``
+    since they were built, else ``pairs`` (jittable): a step moves no vertex farther than half
+    the skin from where they were built, so every step has at least a quarter of it to go."""
+    return jax.lax.cond(
+        needs_update(x, pairs.x_built, 0.5 * skin),
+        lambda: update(x, pairs, mesh),
+        lambda: pairs,
+    )
 
 
 def needs_update(x: Array, x_at_build: Array, skin: Array | float) -> Array:

@@ -61,6 +61,7 @@ from origami_jax.contact import (
     ContactPairs,
     build_pairs,
     contact_energy,
+    refreshed,
 )
 from origami_jax.geometry import (
     bar_lengths,
@@ -611,15 +612,22 @@ def _toward(structure: Structure, params: FoldParams) -> Array:
     return 0.5 * hinge_goals(structure, params)[0]
 
 
-def update_reference(x: Array, structure: Structure, reference: Reference) -> Reference:
+def update_reference(
+    x: Array, structure: Structure, reference: Reference, skin: Array | None = None
+) -> Reference:
     """The :class:`Reference` at an accepted iterate ``x``, from the last one: each hinge's
     angle followed continuously, each triangle's current normal turned to the side of its last
-    (a triangle turned over stays turned over, and its barrier keeps pushing it back)."""
+    (a triangle turned over stays turned over, and its barrier keeps pushing it back). The
+    contact pairs are gathered again where a vertex moved more than a quarter of ``skin``
+    since they were (:func:`~origami_jax.contact.refreshed`), or at every iterate without
+    ``skin``."""
     normals = triangle_normals(x, structure.triangles)
     side = jnp.sum(normals * reference.normals, axis=1, keepdims=True)
     pairs = reference.pairs
-    if pairs is not None:  # gathered again around every accepted iterate
+    if pairs is not None and skin is None:
         pairs = contact_pairs(x, structure, pairs.radius)
+    elif pairs is not None:
+        pairs = refreshed(x, pairs, structure.contact, skin)
     return Reference(
         fold_angles(x, structure.hinges, reference.angles),
         jnp.where(side < 0, -normals, normals),

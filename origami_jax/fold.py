@@ -840,8 +840,8 @@ def _fold_once(
 
 
 #: candidate contact pairs are gathered this far beyond ``dhat``, in median triangle altitudes:
-#: a step moves no vertex more than half of it (so the pairs are gathered again at every
-#: accepted iterate)
+#: no vertex moves more than half of it from where they were gathered, and they are gathered
+#: again once one has moved a quarter of it (contact.refreshed)
 CONTACT_SKIN = 2.0
 #: the first capacity for contact pairs holds this many times the start's
 CONTACT_ROOM = 4.0

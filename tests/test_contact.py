@@ -535,6 +535,15 @@ def test_pairs_stay_valid_within_the_skin_and_needs_update():
     again = jax.jit(contact.update)(moved, pairs, jax.tree.map(jnp.asarray, mesh))
     assert again.capacity == pairs.capacity and not bool(again.did_overflow)
     assert found(again) == boxes(moved, mesh, dhat + skin)
+    # refreshed: kept while every vertex moved at most a quarter of the skin, built again beyond
+    fresh = jax.jit(contact.refreshed)
+    mesh_j = jax.tree.map(jnp.asarray, mesh)
+    near = x + 0.99 * 0.25 / 0.499 * step
+    kept = fresh(near, pairs, mesh_j, skin)
+    np.testing.assert_array_equal(np.asarray(kept.x_built), np.asarray(pairs.x_built))
+    rebuilt = fresh(moved, pairs, mesh_j, skin)
+    np.testing.assert_array_equal(np.asarray(rebuilt.x_built), moved)
+    assert found(rebuilt) == found(again)
 
 
 def test_candidates_per_triangle_stay_bounded_as_the_sheet_grows():

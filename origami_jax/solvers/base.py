@@ -35,7 +35,8 @@ Everything else has a default, and :func:`~origami_jax.fold` and
   ``False``);
 * class attributes: ``follows_path`` (``fold(path="auto")`` follows the fold from flat with
   this solver where a scene needs it; default ``False``), ``supports_contact`` (the solver
-  bounds its steps among contact pairs: ``fold(contact=...)``; default ``False``); ``name``
+  bounds its steps among contact pairs, :func:`contact_limit`, and reports their overflow,
+  :func:`with_overflow`: ``fold(contact=...)``; default ``False``); ``name``
   (the result's ``solver``; default the class name, lower case).
 
 **The state** is a ``NamedTuple`` (``fold`` calls ``_replace``) with at least the fields of
@@ -382,7 +383,9 @@ def accept(take: Array, u: Array, state: SolverState, problem: Problem) -> tuple
     """The end of a step: ``u`` where ``take``, else ``state.u``, and the reference moved along
     to it (:func:`~origami_jax.energy.update_reference`; the state's where not taken)."""
     u = jnp.where(take, u, state.u)
-    moved = update_reference(positions(problem, u), problem.structure, state.reference)
+    moved = update_reference(
+        positions(problem, u), problem.structure, state.reference, contact_skin(problem)
+    )
     return u, jax.tree.map(lambda new, old: jnp.where(take, new, old), moved, state.reference)
 
 
@@ -578,18 +581,30 @@ def with_overflow(status: Array, reference: Reference) -> Array:
     return jnp.where(reference.pairs.did_overflow, Status.CONTACT_OVERFLOW, status)
 
 
+def contact_skin(problem: Problem) -> Array | None:
+    """The contact skin of ``problem`` (see :class:`~origami_jax.energy.ContactParams`), or
+    ``None`` in a scene without contact."""
+    return None if problem.structure.contact is None else problem.params.contact.skin
+
+
 def contact_limit(x: Array, step: Array, problem: Problem, reference: Reference) -> Array:
     """The largest multiple of ``step`` (positions, (V, 3); at most 1) that keeps every vertex
-    within half the contact skin of ``x``, where the candidate pairs were gathered (so no pair
-    comes within ``dhat`` unseen), and along which no candidate pair closes below a fraction of
-    its distance (:func:`~origami_jax.contact.step_bound`, incremental potential contact's
-    filter: no face passes through a face). 1 in a scene without contact."""
+    within half the contact skin of where the candidate pairs were gathered (so no pair comes
+    within ``dhat`` unseen), and along which no candidate pair closes below a fraction of its
+    distance from ``x`` (:func:`~origami_jax.contact.step_bound`, incremental potential
+    contact's filter: no face passes through a face). 1 in a scene without contact."""
     pairs = reference.pairs
     if problem.structure.contact is None or pairs is None:
         return jnp.ones((), x.dtype)
-    reach = 0.5 * problem.params.contact.skin
-    moved = jnp.max(jnp.sqrt(jnp.sum(step * step, axis=-1)), initial=0.0)
-    t = jnp.minimum(1.0, reach / jnp.maximum(moved, 1e-300))
+
+    def norms(d):
+        return jnp.sqrt(jnp.sum(d * d, axis=-1))
+
+    # each vertex's room: half the skin less how far it has moved since the pairs were gathered
+    room = jnp.maximum(0.5 * problem.params.contact.skin - norms(x - pairs.x_built), 0.0)
+    speed = norms(step)
+    t = jnp.min(jnp.where(speed > 0, room / jnp.where(speed > 0, speed, 1.0), 1.0), initial=1.0)
+    t = jnp.minimum(t, 1.0)
     return t * step_bound(x, t * step, pairs)
 
 

@@ -97,6 +97,7 @@ from origami_jax.solvers.base import (
     barrier_limit,
     contact_clear,
     contact_limit,
+    contact_skin,
     element_floor,
     gauge,
     has_barriers,
@@ -699,7 +700,9 @@ class Newton(Solver):
         u = keep(u, s.u)
         reference = jax.tree.map(
             keep,
-            _update_reference(positions(problem, u), problem.structure, s.reference),
+            _update_reference(
+                positions(problem, u), problem.structure, s.reference, contact_skin(problem)
+            ),
             s.reference,
         )
         status = with_overflow(status, reference)
