@@ -320,11 +320,12 @@ class Dynamics(Solver):
             alpha = jnp.where(uphill, 0.1, jnp.where(grow, 0.99 * alpha, alpha))
             v = jnp.where(uphill, 0.0, mixed)
 
+        x = positions(problem, s.u)
         if problem.structure.contact is not None:
             # the contact barrier's stiffness grows without bound as layers close: the time
             # step stays within its stability limit (the other terms' was taken at the start)
             c = p.params.contact
-            stiff = stiffest_pair(positions(problem, s.u), s.reference.pairs, c.dhat, c.kappa)
+            stiff = stiffest_pair(x, s.reference.pairs, c.dhat, c.kappa)
             dt = jnp.minimum(dt, self.safety * 2.0 / jnp.sqrt(stiff / jnp.min(mass)))
 
         def total_force(f, vel):
@@ -333,7 +334,6 @@ class Dynamics(Solver):
             return f
 
         barriers = has_barriers(problem.structure)
-        x = positions(problem, s.u)
         if self.integrator == "euler":
             v = v + dt * total_force(force, v) / mass
             if barriers:  # the barrier's stiffness is beyond any stable time step: see base
