@@ -82,6 +82,17 @@ def test_first_order_solvers_stop_where_newton_does(solver):
     assert shortfall == pytest.approx(np.pi - np.abs(newton.fold_angles).max(), abs=1e-7)
 
 
+def test_newton_steps_free_of_the_gauge_with_contact():
+    # a sheet in one piece: steps that turn it are taken free and reframed, where the pairs
+    # were gathered turned with it; the same state as steps kept in the gauge
+    cp = patterns.single_crease(fold_angle=np.pi)
+    free = fold(cp, contact=True)
+    pinned = fold(cp, solver=Newton(free_turn=np.inf), contact=True)
+    assert free.converged and pinned.converged
+    assert len(free.intersections) == 0 and 0.0 < free.contact_min_ratio <= 1.0
+    np.testing.assert_allclose(free.fold_angles, pinned.fold_angles, atol=1e-9)
+
+
 T = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 

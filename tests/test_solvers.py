@@ -837,7 +837,7 @@ def test_reframe_and_rigid_free_piece_by_piece():
     """Each piece is moved back to its own pinned triangle's pose, and loses its own rigid
     motion, whatever the other piece does."""
     from origami_jax.solvers.base import gauge
-    from origami_jax.solvers.newton import reframe, rigid_free
+    from origami_jax.solvers.reframe import reframe, reframing, rigid_free
 
     cp = _two_squares()
     mesh = cp.mesh
@@ -861,6 +861,29 @@ def test_reframe_and_rigid_free_piece_by_piece():
     np.testing.assert_allclose(back, x, atol=1e-12)
     u = jnp.asarray(back) - problem.start
     np.testing.assert_allclose(np.asarray(gauge(problem, u)), np.asarray(u), atol=1e-12)
+
+    # as a function of other points: the same motions; one for the whole sheet only where it
+    # is in one piece (so that distances between any two vertices are kept)
+    move, one = reframing(jnp.asarray(moved), problem)
+    np.testing.assert_allclose(np.asarray(move(jnp.asarray(moved))), back, atol=1e-12)
+    assert not bool(one)
+    whole = moved.copy()
+    whole[piece == 1] = x[piece == 1] @ _rotation([1, 2, 3], 0.8).T + [1, -2, 0.5]
+    move, _ = reframing(jnp.asarray(whole), problem)
+    y = rng.standard_normal(x.shape)
+    far = np.asarray(move(jnp.asarray(y)))
+    assert not np.allclose(far[piece == 0], y[piece == 0])
+    # the pieces moved by one motion are moved back by one: any points keep their distances
+    d = np.linalg.norm(y[:, None] - y[None], axis=-1)
+    d_far = np.linalg.norm(far[:, None] - far[None], axis=-1)
+    np.testing.assert_allclose(d_far, d, atol=1e-12)
+    miura = patterns.miura_ori(2, 2)
+    mesh1 = miura.mesh
+    problem1 = Newton().prepare(
+        make_problem(mesh1, make_structure(mesh1), make_params(miura, dtype=jnp.float64)), mesh1
+    )
+    x1 = np.asarray(problem1.start) @ _rotation([0, 1, 1], 1.1).T + [2, 0, 1]
+    assert bool(reframing(jnp.asarray(x1), problem1)[1])
 
     # an infinitesimal rigid motion per piece is removed whole, and its turn reported
     w = np.zeros_like(x)

@@ -117,7 +117,7 @@ from origami_jax.solvers.hessian_layout import (
 )
 from origami_jax.solvers.innermost import batch_innermost
 from origami_jax.solvers.reframe import (
-    reframe,
+    reframing,
     rigid_fit,
     rigid_free,  # noqa: F401
 )
@@ -567,10 +567,12 @@ class Newton(Solver):
         # reframed): reframing moves every vertex, so near a solution it would only add the
         # rounding of a rotation found from one small triangle
         unpin = spin > self.free_turn
-        if problem.structure.contact is not None:
-            # reframing turns each piece on its own, past the contact filter: with contact, the
-            # steps stay in the gauge
-            unpin = jnp.zeros((), bool)
+        contact = problem.structure.contact is not None
+        if contact:
+            # reframing turns each piece on its own, past the contact filter: with contact, a
+            # step is taken free only where one rigid motion reframes the whole sheet (where the
+            # pairs were gathered moves with it, so each vertex keeps its room)
+            unpin = unpin & reframing(x, problem)[1]
         step = jnp.where(ok, jnp.where(unpin, free, step), 0.0)
         if accelerate:
             curve = gauge(problem, self._acceleration(s, problem, x, step, solve))
@@ -598,7 +600,6 @@ class Newton(Solver):
                 problem=problem,
                 reference=s.reference,
             )
-        contact = problem.structure.contact is not None
         if contact:
             # no vertex moves beyond half the skin, no face through a face (base.contact_limit)
             limit = limit * contact_limit(x, limit * step, problem, s.reference)
@@ -653,8 +654,14 @@ class Newton(Solver):
 
             alpha, value, _, _ = jax.lax.while_loop(grow, double, (alpha, value, True, 0))
         end = point(alpha)
-        u = jnp.where(unpin, reframe(end, problem), end) - problem.start
-        return u, value, accepted, full, noise, exact, used_exact, alpha > 1
+        move, _ = reframing(end, problem)
+        u = jnp.where(unpin, move(end), end) - problem.start
+        reference = s.reference
+        if contact and reference.pairs is not None:
+            built = reference.pairs.x_built
+            pairs = replace(reference.pairs, x_built=jnp.where(unpin, move(built), built))
+            reference = reference._replace(pairs=pairs)
+        return u, value, accepted, full, noise, exact, used_exact, alpha > 1, reference
 
     def _acceleration(self, s: NewtonState, problem: Problem, x, velocity: Array, solve) -> Array:
         """``a = -H^-1 J^T W r''[v, v]`` at positions ``x`` (zero when too large or not
@@ -669,7 +676,7 @@ class Newton(Solver):
         # one step tried per iteration: a rejected exact attempt costs the iteration and the
         # next one is convex (but on the host an exact Hessian that does not factor hands over
         # within it: see ``_factor``)
-        u, value, accepted, full, noise, tried, used_exact, expanded = self._attempt(
+        u, value, accepted, full, noise, tried, used_exact, expanded, moved = self._attempt(
             s, problem, s.exact
         )
         exact_ran = tried & used_exact
@@ -701,7 +708,7 @@ class Newton(Solver):
         reference = jax.tree.map(
             keep,
             _update_reference(
-                positions(problem, u), problem.structure, s.reference, contact_skin(problem)
+                positions(problem, u), problem.structure, moved, contact_skin(problem)
             ),
             s.reference,
         )

@@ -11,13 +11,15 @@ the Hessian layout's (``HessianLayout.piece``, in ``problem.aux``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import jax
 import jax.numpy as jnp
 from jax import Array
 
 from origami_jax.solvers.base import Problem, pin_axes
 
-__all__ = ["reframe", "rigid_free", "rigid_fit"]
+__all__ = ["reframe", "reframing", "rigid_free", "rigid_fit"]
 
 
 def _pinned_frames(x: Array, problem: Problem) -> tuple[Array, Array, Array]:
@@ -45,13 +47,25 @@ def reframe(x: Array, problem: Problem) -> Array:
     gauge holds it (a at its start, b on the start's line ab, c in the start's plane abc):
     the displacement ``x - start`` then satisfies the gauge exactly, so :func:`positions`
     gives ``x`` back."""
+    return reframing(x, problem)[0](x)
+
+
+def reframing(x: Array, problem: Problem) -> tuple[Callable[[Array], Array], Array]:
+    """The rigid motions :func:`reframe` applies at ``x``, as a function of any (V, 3) points
+    (each vertex's moved by its piece's motion), and () whether one motion moves every vertex:
+    then distances between any two points are kept, such as those of contact pairs."""
     frame, a, usable = _pinned_frames(x, problem)
     frame0, a0, usable0 = _pinned_frames(problem.start, problem)
     usable = usable & usable0  # a start that collapses a pinned triangle has no frame to keep
     rotation = jnp.einsum("kji,kjl->kil", frame0, frame)  # frame0^T frame
     k, ok = _piece_index(problem, usable)
-    moved = jnp.einsum("vij,vj->vi", rotation[k], x - a[k]) + a0[k]
-    return jnp.where(ok[:, None], moved, x)
+
+    def move(y: Array) -> Array:
+        moved = jnp.einsum("vij,vj->vi", rotation[k], y - a[k]) + a0[k]
+        return jnp.where(ok[:, None], moved, y)
+
+    one = (jnp.sum(usable) == 1) & jnp.all(ok | (problem.aux.piece < 0))  # (< 0: on no bar)
+    return move, one
 
 
 def rigid_free(w: Array, x: Array, problem: Problem) -> tuple[Array, Array]:
