@@ -323,7 +323,7 @@ def test_barrier_value_gradient_and_hessian_against_hand_formulas():
 def test_contact_stiffness_is_the_bars_mean_work_scale():
     cp = patterns.miura_ori(2, 2)
     params = make_params(cp, stiffness={"axial": 3.0})
-    want = 3.0 * np.mean(np.asarray(params.rest_length))
+    want = 1e-3 * 3.0 * np.mean(np.asarray(params.rest_length))
     assert float(contact.contact_stiffness(params)) == pytest.approx(want, rel=1e-14)
     assert contact.default_dhat(cp.diameter) == pytest.approx(1e-3 * cp.diameter)
 
