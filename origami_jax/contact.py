@@ -29,13 +29,11 @@ the mean of the bars' ``axial * l0``, the scale of a bar's energy at a strain of
 at mid-zone, about ``kappa / dhat``, is then some ``l0 / (1000 dhat)`` times a bar's at unit
 strain, far above the creases' (1000 times weaker than the bars at the defaults) that press
 layers together; and the barrier grows without bound, so nothing pushes one layer through
-another. A weight of the bars' own scale held the layers at the edge of the barrier's reach,
-where its curvature vanishes: Newton's steps aimed through them and were cut short at every
-iteration (birdBase.svg: 183 iterations against 95 at 1e-3, frogBase.svg 102 against 56).
-Edge-edge terms can be multiplied by ipc-toolkit's
-mollifier (:func:`edge_edge_mollifier`), which turns them off smoothly as the edges become
-parallel, where the edge-edge distance is not differentiable (the vertex-face pairs then hold
-the layers apart).
+another. A weight of the bars' own scale would hold the layers at the edge of the barrier's
+reach, where its curvature vanishes and Newton's model does not see it (docs/contact.md).
+Edge-edge terms can be multiplied by ipc-toolkit's mollifier (:func:`edge_edge_mollifier`),
+which turns them off smoothly as the edges become parallel, where the edge-edge distance is not
+differentiable (the vertex-face pairs then hold the layers apart).
 
 **dhat.** :data:`DHAT` (1e-3) of the flat sheet's diameter, by :func:`default_dhat`: it is the
 gap that folded layers keep (the barrier's reach, so a stand-in for the paper's thickness;

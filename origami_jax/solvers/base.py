@@ -604,7 +604,6 @@ def contact_limit(x: Array, step: Array, problem: Problem, reference: Reference)
     room = jnp.maximum(0.5 * problem.params.contact.skin - norms(x - pairs.x_built), 0.0)
     speed = norms(step)
     t = jnp.min(jnp.where(speed > 0, room / jnp.where(speed > 0, speed, 1.0), 1.0), initial=1.0)
-    t = jnp.minimum(t, 1.0)
     return t * step_bound(x, t * step, pairs)
 
 
