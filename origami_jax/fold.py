@@ -234,7 +234,20 @@ class FoldResult:
                     "one vertex) near that point"
                 )
             )
-        if self.converged and self.fold_angle_error_max > 0.1:
+        far = self.fold_angle_error_max > 0.1
+        # pairs within the barrier's reach push back: a fold they hold short of its targets
+        # is contact's doing, not (only) targets that cannot all be met
+        pressing = self.contact_dhat is not None and bool(self.contact_pairs)
+        if pressing and (far or not self.converged):
+            out.append(
+                f"{self.contact_pairs} contact pairs within dhat ({self.contact_dhat:.3g}, the "
+                f"closest at {self.contact_min_ratio:.2f} dhat) hold layers apart that the "
+                f"targets bring closer (fold-angle error up to "
+                f"{np.degrees(self.fold_angle_error_max):.3g} deg): a smaller contact distance "
+                "(contact=<dhat>) lets them closer; layers that must pass each other to reach "
+                "the targets cannot (contact=False folds through them)"
+            )
+        elif self.converged and far:
             out.append(
                 f"fold-angle error up to {np.degrees(self.fold_angle_error_max):.3g} deg at "
                 "equilibrium: the targets are not all reachable at once (not mutually "

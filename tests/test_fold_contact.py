@@ -53,7 +53,7 @@ def test_a_full_valley_stops_at_thickness(linear_solver):
     normal /= np.linalg.norm(normal)
     gap = np.abs((x[[0, 5]] - x[1]) @ normal)
     assert np.all(gap > thick.contact_dhat) and np.all(gap <= 2 * thick.contact_dhat)
-    assert "contact" in thick.summary()
+    assert "contact" in thick.summary() and thick.advice == []
     # the contact forces: equal and opposite over the pairs, and at equilibrium they balance
     # the springs' (the energy without contact) on every vertex
     force = thick.contact_forces
@@ -65,6 +65,18 @@ def test_a_full_valley_stops_at_thickness(linear_solver):
     assert per_triangle.shape == (len(cp.mesh.triangles),)
     assert per_triangle.max() == pytest.approx(np.linalg.norm(force, axis=1).max())
     assert not bare.contact_forces.any()
+
+
+def test_a_fold_held_short_by_contact_says_so():
+    # a thickness of a seventh of the sheet's diameter: the halves stop far from flat, at
+    # equilibrium, and the advice names contact (not targets that cannot all be met)
+    cp = patterns.single_crease(fold_angle=np.pi)
+    thick = fold(cp, contact=0.2)
+    assert thick.converged, thick.reason
+    assert thick.contact_pairs >= 1 and thick.fold_angle_error_max > 0.1
+    (advice,) = thick.advice
+    assert "contact pairs within dhat (0.2," in advice and "contact=<dhat>" in advice
+    assert "not mutually consistent" not in advice
 
 
 @pytest.mark.parametrize("solver", ["lbfgs", "dynamics"])
