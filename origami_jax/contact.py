@@ -572,30 +572,45 @@ def _within(x: Array, pairs: ContactPairs, dhat: Array | float, fn: Callable) ->
     return _narrow(near_pt, near_ee, narrow, lambda: fn(pairs))
 
 
-def _pair_hessian(q: Array, on: Array, kind: int, dhat: Array, kappa: Array) -> Array:
-    """(4, 4, 3, 3) one pair's barrier Hessian in its 4 corners ``q`` (4, 3), its Gauss-Newton
-    part ``e''(d2) g g^T`` in the squared distance ``d2`` (``g`` its gradient): positive
-    semi-definite (the barrier is convex in ``d2``), without the term ``e'(d2) hess(d2)``,
-    which the barrier's fall (``e' < 0``) makes indefinite. (A per-pair eigenvalue clip, as
-    ipc-toolkit's, needs a vmapped ``eigh``, which hangs XLA's CPU runtime here.)"""
+def _pair_hessian(
+    q: Array, on: Array, kind: int, dhat: Array, kappa: Array, exact: Array | bool = False
+) -> Array:
+    """(4, 4, 3, 3) one pair's barrier Hessian in its 4 corners ``q`` (4, 3): its Gauss-Newton
+    part ``e''(d2) g g^T`` in the squared distance ``d2`` (``g`` its gradient), positive
+    semi-definite (the barrier is convex in ``d2``); with ``exact``, plus the term
+    ``e'(d2) hess(d2)``, which the barrier's fall (``e' < 0``) makes indefinite (Newton's exact
+    attempts, which fall back to the convex part where it does not factor or its step is
+    refused; without it Newton converges only linearly where layers rest on each other). (A
+    per-pair eigenvalue clip, as ipc-toolkit's, needs a vmapped ``eigh``, which hangs XLA's CPU
+    runtime here.)"""
     rows = _pt_rows if kind == 1 else _ee_rows
-    d2, g = jax.value_and_grad(lambda f: rows(f.reshape(1, 4, 3))[0])(q.reshape(12))
+
+    def squared(f: Array) -> Array:
+        return rows(f.reshape(1, 4, 3))[0]
+
+    d2, g = jax.value_and_grad(squared)(q.reshape(12))
     scale = 1.0 / (dhat * dhat)
-    _, _, b2 = ipc(jnp.where(on, d2, 1.0 / scale) * scale)
+    _, b1, b2 = ipc(jnp.where(on, d2, 1.0 / scale) * scale)
     h = (kappa * b2 * scale * scale) * jnp.outer(g, g)
+    if not (isinstance(exact, bool) and not exact):
+        curvature = jax.hessian(squared)(q.reshape(12))
+        h = h + (kappa * b1 * scale * jnp.asarray(exact, h.dtype)) * curvature
     h = jnp.where(on & jnp.all(jnp.isfinite(h)), h, 0.0)  # a degenerate pair: no curvature
     return h.reshape(4, 3, 4, 3).transpose(0, 2, 1, 3)
 
 
-def pair_hessians(x: Array, pairs: ContactPairs, dhat: Array, kappa: Array) -> tuple[Array, Array]:
+def pair_hessians(
+    x: Array, pairs: ContactPairs, dhat: Array, kappa: Array, exact: Array | bool = False
+) -> tuple[Array, Array]:
     """``(corners, blocks)``: (P + Q, 4) the vertices of every candidate pair and (P + Q, 4, 4,
-    3, 3) the 3 x 3 blocks of their barrier Hessians' positive semi-definite part (see
-    :func:`_pair_hessian`; zero for pairs out of reach and padding rows)."""
+    3, 3) the 3 x 3 blocks of their barrier Hessians' positive semi-definite part, or with
+    ``exact`` their exact Hessians (see :func:`_pair_hessian`; zero for pairs out of reach and
+    padding rows)."""
     pt_on = pairs.pt_mask & _apart(pairs.pt, 1)
     ee_on = pairs.ee_mask & _apart(pairs.ee, 2)
-    each = jax.vmap(_pair_hessian, in_axes=(0, 0, None, None, None))
-    hp = each(x[pairs.pt], pt_on, 1, dhat, kappa)
-    he = each(x[pairs.ee], ee_on, 2, dhat, kappa)
+    each = jax.vmap(_pair_hessian, in_axes=(0, 0, None, None, None, None))
+    hp = each(x[pairs.pt], pt_on, 1, dhat, kappa, exact)
+    he = each(x[pairs.ee], ee_on, 2, dhat, kappa, exact)
     return jnp.concatenate([pairs.pt, pairs.ee]), jnp.concatenate([hp, he])
 
 
@@ -605,12 +620,13 @@ def add_pair_hessians(
     dhat: Array,
     kappa: Array,
     add: Callable[[Array, Array], Array],
+    exact: Array | bool = False,
 ) -> Array:
     """``add(corners, blocks)`` of :func:`pair_hessians` over the pairs within ``dhat`` only
     (:func:`_within`; the others' are zero): what Newton adds to its assembled Hessian. ``add``
     gives an array of one shape whatever the number of rows."""
     x = jnp.asarray(x)
-    return _within(x, pairs, dhat, lambda few: add(*pair_hessians(x, few, dhat, kappa)))
+    return _within(x, pairs, dhat, lambda few: add(*pair_hessians(x, few, dhat, kappa, exact)))
 
 
 def stiffest_pair(x: Array, pairs: ContactPairs, dhat: Array, kappa: Array) -> Array:

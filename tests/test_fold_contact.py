@@ -140,7 +140,7 @@ def test_two_triangles_pushed_together_stop_at_dhat_and_never_cross():
     assert np.max(np.abs(np.asarray(grad(x)) * fixed)) < 1e-6 * k
 
 
-def test_pair_hessians_are_the_barriers_gauss_newton_part():
+def test_pair_hessians_are_the_barriers_gauss_newton_part_or_whole():
     rng = np.random.default_rng(3)
     upper = np.array([[0.3, 0.3, 0.02], [0.9, 0.2, 0.03], [0.2, 0.8, 0.04]])
     x = jnp.asarray(np.concatenate([T, upper + 0.01 * rng.normal(size=(3, 3))]))
@@ -150,6 +150,13 @@ def test_pair_hessians_are_the_barriers_gauss_newton_part():
     corners, blocks = pair_hessians(x, pairs, dhat, kappa)
     rows = np.asarray(corners)
     gn = np.asarray(blocks).transpose(0, 1, 3, 2, 4).reshape(-1, 12, 12)
+    # Newton's exact attempts take the whole Hessian, flag given as a traced value or not
+    exact = [
+        np.asarray(pair_hessians(x, pairs, dhat, kappa, flag)[1])
+        .transpose(0, 1, 3, 2, 4)
+        .reshape(-1, 12, 12)
+        for flag in (True, jnp.asarray(True))
+    ]
     n_pt = pairs.pt.shape[0]
     active = 0
     for r, q in enumerate(rows):
@@ -174,6 +181,8 @@ def test_pair_hessians_are_the_barriers_gauss_newton_part():
         b1 = -2 * (s - 1) * np.log(s) - (s - 1) ** 2 / s if s < 1 else 0.0
         rest = kappa * b1 / dhat**2 * np.asarray(jax.hessian(d2)(corners_r))
         np.testing.assert_allclose(gn[r] + rest, full, atol=1e-8 * (1 + np.abs(full).max()))
+        for h in exact:
+            np.testing.assert_allclose(h[r], full, atol=1e-8 * (1 + np.abs(full).max()))
         active += s < 1
     assert active >= 3  # the test saw pairs inside the barrier's reach
 

@@ -237,7 +237,9 @@ def assemble(x: Array, problem: Problem, reference: Reference, exact: Array | bo
     contact = None
     if structure.contact is not None and reference.pairs is not None:
         c = problem.params.contact
-        contact = functools.partial(add_pair_hessians, x, reference.pairs, c.dhat, c.kappa)
+        contact = functools.partial(
+            add_pair_hessians, x, reference.pairs, c.dhat, c.kappa, exact=exact
+        )
     v = problem.start.shape[0]
     elements = hessian_elements(structure)
     if layout.sparse:
