@@ -3,8 +3,9 @@
     python benchmarks/contact_folds.py              # the files listed in FILES
     python benchmarks/contact_folds.py --max-time 300
 
-For each file of ``../shared/patterns`` in :data:`FILES` (the bases, and those whose fold at
-the defaults ends with faces crossing), Newton at the defaults (float64) folds it twice:
+For each file of ``../shared/patterns`` in :data:`FILES` (the bases, those whose fold at the
+defaults ends with faces crossing, and two models whose layers close on each other mid-path,
+airplane.svg and flappingBird.svg), Newton at the defaults (float64) folds it twice:
 ``contact=False`` and ``contact=True``. Each row gives the status, iterations, compile and run
 time, the mean fold-angle error (degrees), creases through pi, crossing face pairs
 (``result.intersections``), and with contact the pairs within ``dhat`` and the least distance
@@ -44,6 +45,8 @@ FILES = (
     "origami-simulator/Bases/waterbombBase.svg",
     "origami-simulator/Bases/birdBase.svg",
     "origami-simulator/Bases/frogBase.svg",
+    "origami-simulator/Origami/airplane.svg",
+    "origami-simulator/Origami/flappingBird.svg",
     "origami-simulator/Curved/curvedcrease2.svg",
     "origami-simulator/doc/cuts.svg",
     "origami-simulator/doc/opacityExamples.svg",
