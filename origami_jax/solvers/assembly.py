@@ -282,7 +282,16 @@ def assemble(x: Array, problem: Problem, reference: Reference, exact: Array | bo
         def with_pairs(corners, pair_blocks):
             return matrix.at[corners[:, :, None], corners[:, None, :]].add(pair_blocks)
 
-        matrix = contact(with_pairs, exact=exact)
+        if isinstance(exact, bool):
+            matrix = contact(with_pairs, exact=exact)
+        else:
+            # the pairs' own curvature (a Hessian of each pair's distance) only in the
+            # iterations that take it, as the elements' (a traced flag computed it always)
+            matrix = jax.lax.cond(
+                _any_member(jnp.any(exact)),
+                lambda: contact(with_pairs, exact=exact),
+                lambda: contact(with_pairs, exact=False),
+            )
     matrix = jnp.swapaxes(matrix, 1, 2)  # (V, 3, V, 3)
     return _project_pinned(matrix, problem.pinned, problem.projectors).reshape(-1)
 
