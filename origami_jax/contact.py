@@ -10,7 +10,10 @@ pure JAX, jit/grad/vmap-friendly, except the host helpers that pick array sizes
 **Distances** (:func:`point_triangle_distance_sq`, :func:`edge_edge_distance_sq`) are exact and
 squared, as in ipc-toolkit: the closest features are classified first (vertex-vertex,
 vertex-edge, vertex-face, edge-edge lines; parallel edges fall to their vertex cases), then that
-case's formula gives the value, so its gradient and Hessian are those of one smooth formula.
+case's formula gives the value. The gradient is ``2 w_k r`` in corner ``k``, ``r = sum w_k
+x_k`` the vector between the closest points and ``w`` the case's weights of the corners (the
+closest points minimise over the features: moving them along the features changes nothing to
+first order), and the Hessian is JAX's derivative of that gradient: those of one smooth formula.
 The case is the feature pair of least distance among those whose closest points lie inside the
 features (the same case ipc-toolkit's classification picks, written so that it vectorises).
 Every formula divides only by a guarded denominator: the gradient is finite at every
@@ -190,9 +193,10 @@ def _eps(*arrays: Array) -> float:
     return float(jnp.finfo(jnp.result_type(*arrays, float)).eps)
 
 
-def _point_line(p: Array, e0: Array, e1: Array, eps: float) -> tuple[Array, Array]:
-    """Squared distance from ``p`` to the line ``e0 e1``, and whether its foot lies strictly
-    inside the edge (and the edge is long enough to have a direction)."""
+def _point_line(p: Array, e0: Array, e1: Array, eps: float) -> tuple[Array, Array, Array]:
+    """Squared distance from ``p`` to the line ``e0 e1``, whether its foot lies strictly inside
+    the edge (and the edge is long enough to have a direction), and the foot's place ``s``
+    along it (``e0 + s (e1 - e0)``; 0 where the edge has no direction)."""
     e = e1 - e0
     den = _dot(e, e)
     # an edge this short next to the point's distance: its end points give the same distance
@@ -200,20 +204,37 @@ def _point_line(p: Array, e0: Array, e1: Array, eps: float) -> tuple[Array, Arra
     c = jnp.cross(e0 - p, e1 - p)
     t = _dot(p - e0, e)
     inside = usable & (t > 0.0) & (t < den)
-    return _dot(c, c) / _safe(den, usable), inside
+    safe = _safe(den, usable)
+    return _dot(c, c) / safe, inside, jnp.where(usable, t / safe, 0.0)
 
 
-def _point_triangle_cases(p: Array, t0: Array, t1: Array, t2: Array) -> tuple[Array, Array]:
-    """(..., 7) squared distances of the cases of :data:`POINT_TRIANGLE_CASES` and whether each
-    is realised (its closest points lie inside their features)."""
+def _weights(dtype, *rows: tuple) -> Array:
+    """(..., C, 4) from C rows of 4 weights (arrays or numbers) of a pair's corners."""
+    shape = jnp.broadcast_shapes(*(jnp.shape(w) for row in rows for w in row))
+
+    def row_of(ws):
+        return jnp.stack([jnp.broadcast_to(jnp.asarray(w, dtype), shape) for w in ws], axis=-1)
+
+    return jnp.stack([row_of(ws) for ws in rows], axis=-2)
+
+
+def _point_triangle_cases(p: Array, t0: Array, t1: Array, t2: Array) -> tuple[Array, Array, Array]:
+    """(..., 7) squared distances of the cases of :data:`POINT_TRIANGLE_CASES`, whether each
+    is realised (its closest points lie inside their features), and (..., 7, 4) each case's
+    weights ``w`` of the corners ``(p, t0, t1, t2)``: ``sum_k w_k x_k`` is the vector between
+    its closest points."""
     eps = _eps(p, t0, t1, t2)
     corners = (t0, t1, t2)
     values = [_dot(p - t, p - t) for t in corners]
     ok = [jnp.ones(values[0].shape, bool)] * 3
+    rows = [(1.0, -float(k == 0), -float(k == 1), -float(k == 2)) for k in range(3)]
     for k in range(3):
-        v, inside = _point_line(p, corners[k], corners[(k + 1) % 3], eps)
+        v, inside, s = _point_line(p, corners[k], corners[(k + 1) % 3], eps)
         values.append(v)
         ok.append(inside)
+        row = [1.0, 0.0, 0.0, 0.0]
+        row[1 + k], row[1 + (k + 1) % 3] = s - 1.0, -s
+        rows.append(tuple(row))
     u, w = t1 - t0, t2 - t0
     n = jnp.cross(u, w)
     nn = _dot(n, n)
@@ -226,19 +247,30 @@ def _point_triangle_cases(p: Array, t0: Array, t1: Array, t2: Array) -> tuple[Ar
     h = _dot(p - t0, n)
     values.append(h * h / _safe(nn, flat))
     ok.append(inside)
-    return jnp.stack(values, axis=-1), jnp.stack(ok, axis=-1)
+    # the foot's barycentric coordinates on t1 and t2
+    b1 = jnp.where(flat, _dot(jnp.cross(p - t0, w), n) / _safe(nn, flat), 0.0)
+    b2 = jnp.where(flat, _dot(jnp.cross(u, p - t0), n) / _safe(nn, flat), 0.0)
+    rows.append((1.0, b1 + b2 - 1.0, -b1, -b2))
+    return jnp.stack(values, axis=-1), jnp.stack(ok, axis=-1), _weights(values[0].dtype, *rows)
 
 
-def _edge_edge_cases(a0: Array, a1: Array, b0: Array, b1: Array) -> tuple[Array, Array]:
-    """(..., 9) squared distances of the cases of :data:`EDGE_EDGE_CASES` and whether each is
-    realised."""
+def _edge_edge_cases(a0: Array, a1: Array, b0: Array, b1: Array) -> tuple[Array, Array, Array]:
+    """(..., 9) squared distances of the cases of :data:`EDGE_EDGE_CASES`, whether each is
+    realised, and (..., 9, 4) each case's weights of the corners ``(a0, a1, b0, b1)`` (as in
+    :func:`_point_triangle_cases`)."""
     eps = _eps(a0, a1, b0, b1)
     values = [_dot(p - q, p - q) for p in (a0, a1) for q in (b0, b1)]
     ok = [jnp.ones(values[0].shape, bool)] * 4
-    for p, e0, e1 in ((a0, b0, b1), (a1, b0, b1), (b0, a0, a1), (b1, a0, a1)):
-        v, inside = _point_line(p, e0, e1, eps)
+    rows = [(1.0, 0.0, -1.0, 0.0), (1.0, 0.0, 0.0, -1.0), (0.0, 1.0, -1.0, 0.0)]
+    rows.append((0.0, 1.0, 0.0, -1.0))
+    for k, (p, e0, e1) in enumerate(((a0, b0, b1), (a1, b0, b1), (b0, a0, a1), (b1, a0, a1))):
+        v, inside, s = _point_line(p, e0, e1, eps)
         values.append(v)
         ok.append(inside)
+        if k < 2:  # an end point of a and the edge b
+            rows.append((float(k == 0), float(k == 1), s - 1.0, -s))
+        else:  # the edge a and an end point of b
+            rows.append((1.0 - s, s, -float(k == 2), -float(k == 3)))
     u, v = a1 - a0, b1 - b0
     n = jnp.cross(u, v)
     nn = _dot(n, n)
@@ -252,7 +284,9 @@ def _edge_edge_cases(a0: Array, a1: Array, b0: Array, b1: Array) -> tuple[Array,
     h = _dot(w, n)
     values.append(h * h / _safe(nn, crossing))
     ok.append(inside)
-    return jnp.stack(values, axis=-1), jnp.stack(ok, axis=-1)
+    s, t = (jnp.where(crossing, z / _safe(nn, crossing), 0.0) for z in (s, t))
+    rows.append((1.0 - s, s, t - 1.0, -t))
+    return jnp.stack(values, axis=-1), jnp.stack(ok, axis=-1), _weights(values[0].dtype, *rows)
 
 
 def _classify(values: Array, ok: Array) -> Array:
@@ -265,32 +299,68 @@ def _select(values: Array, case: Array) -> Array:
     return jnp.take_along_axis(values, case[..., None], axis=-1)[..., 0]
 
 
+def _closest_distance(cases: Callable) -> Callable:
+    """The squared distance of the realised case of least distance of ``cases`` (a function
+    of 4 corners, as :func:`_point_triangle_cases`), differentiated as ``2 w_k r`` in corner
+    ``k``: ``r = sum w_k x_k`` joins the closest points, which are a minimum over the
+    features' points, so moving them along their features changes nothing to first order.
+    The weights are short formulas in the corners (their own derivatives give the Hessian),
+    where differentiating every case's distance and selecting one took several times the
+    code (and the compile time)."""
+
+    @jax.custom_jvp
+    def distance(*corners: Array) -> Array:
+        values, ok, _ = cases(*corners)
+        return _select(values, _classify(values, ok))
+
+    @distance.defjvp
+    def _(corners, tangents):
+        d2, w, r = _closest(cases, corners)
+        rate = sum(w[..., k] * _dot(r, tangents[k]) for k in range(4))
+        return d2, 2.0 * rate
+
+    return distance
+
+
+def _closest(cases: Callable, corners: tuple) -> tuple[Array, Array, Array]:
+    """``(d2, w, r)``: the squared distance of the realised case of least distance of
+    ``cases`` at ``corners`` (4 arrays (..., 3)), its weights ``w`` (..., 4) and the vector
+    ``r = sum_k w_k x_k`` (..., 3) between its closest points."""
+    values, ok, weights = cases(*corners)
+    case = _classify(values, ok)
+    w = jnp.take_along_axis(weights, case[..., None, None], axis=-2)[..., 0, :]
+    r = sum(w[..., k, None] * corners[k] for k in range(4))
+    return _select(values, case), w, r
+
+
+_point_triangle_distance_sq = _closest_distance(_point_triangle_cases)
+_edge_edge_distance_sq = _closest_distance(_edge_edge_cases)
+
+
 def point_triangle_distance_type(p: Array, t0: Array, t1: Array, t2: Array) -> Array:
     """(...,) int: the index in :data:`POINT_TRIANGLE_CASES` of the closest features of point
     ``p`` and triangle ``t0 t1 t2`` (each (..., 3))."""
-    return _classify(*_point_triangle_cases(p, t0, t1, t2))
+    return _classify(*_point_triangle_cases(p, t0, t1, t2)[:2])
 
 
 def point_triangle_distance_sq(p: Array, t0: Array, t1: Array, t2: Array) -> Array:
     """(...,) squared distance from point ``p`` to triangle ``t0 t1 t2`` (each (..., 3)): that
     of the case :func:`point_triangle_distance_type` picks (its gradient is finite
     everywhere)."""
-    values, ok = _point_triangle_cases(p, t0, t1, t2)
-    return _select(values, _classify(values, ok))
+    return _point_triangle_distance_sq(*jnp.broadcast_arrays(p, t0, t1, t2))
 
 
 def edge_edge_distance_type(a0: Array, a1: Array, b0: Array, b1: Array) -> Array:
     """(...,) int: the index in :data:`EDGE_EDGE_CASES` of the closest features of edges
     ``a0 a1`` and ``b0 b1`` (each (..., 3)); parallel edges get an end point case."""
-    return _classify(*_edge_edge_cases(a0, a1, b0, b1))
+    return _classify(*_edge_edge_cases(a0, a1, b0, b1)[:2])
 
 
 def edge_edge_distance_sq(a0: Array, a1: Array, b0: Array, b1: Array) -> Array:
     """(...,) squared distance between edges ``a0 a1`` and ``b0 b1`` (each (..., 3)), parallel
     ones included: that of the case :func:`edge_edge_distance_type` picks (its gradient is
     finite everywhere)."""
-    values, ok = _edge_edge_cases(a0, a1, b0, b1)
-    return _select(values, _classify(values, ok))
+    return _edge_edge_distance_sq(*jnp.broadcast_arrays(a0, a1, b0, b1))
 
 
 def edge_edge_mollifier(a0: Array, a1: Array, b0: Array, b1: Array, eps_x: Array) -> Array:
@@ -583,17 +653,20 @@ def _pair_hessian(
     refused; without it Newton converges only linearly where layers rest on each other). (A
     per-pair eigenvalue clip, as ipc-toolkit's, needs a vmapped ``eigh``, which hangs XLA's CPU
     runtime here.)"""
-    rows = _pt_rows if kind == 1 else _ee_rows
+    cases = _point_triangle_cases if kind == 1 else _edge_edge_cases
 
-    def squared(f: Array) -> Array:
-        return rows(f.reshape(1, 4, 3))[0]
+    def gradient(f: Array) -> tuple[Array, Array]:
+        # the squared distance's gradient (_closest_distance), written out: its Jacobian
+        # (forward mode only) is the distance's Hessian
+        d2, w, r = _closest(cases, tuple(f.reshape(4, 3)))
+        return 2.0 * (w[:, None] * r).reshape(12), d2
 
-    d2, g = jax.value_and_grad(squared)(q.reshape(12))
+    g, d2 = gradient(q.reshape(12))
     scale = 1.0 / (dhat * dhat)
     _, b1, b2 = ipc(jnp.where(on, d2, 1.0 / scale) * scale)
     h = (kappa * b2 * scale * scale) * jnp.outer(g, g)
     if not (isinstance(exact, bool) and not exact):
-        curvature = jax.hessian(squared)(q.reshape(12))
+        curvature = jax.jacfwd(lambda f: gradient(f)[0])(q.reshape(12))
         h = h + (kappa * b1 * scale * jnp.asarray(exact, h.dtype)) * curvature
     h = jnp.where(on & jnp.all(jnp.isfinite(h)), h, 0.0)  # a degenerate pair: no curvature
     return h.reshape(4, 3, 4, 3).transpose(0, 2, 1, 3)

@@ -626,33 +626,38 @@ class Newton(Solver):
             bound = s.energy + 1e-4 * alpha * slope + noise
             return jnp.isfinite(value) & (value <= bound)
 
+        # halvings from alpha = 1 until the energy falls enough, then, where the full step
+        # passed, doublings while the energy falls on: one loop, so the energy (and the barrier
+        # and contact checks) is compiled once, not once per phase
+        grows = self.expansions > 0
+
         def cond(c):
-            alpha, value, k = c
-            return ok & ~sufficient(alpha, value) & (k < self.max_linesearch_steps)
+            alpha, value, k, grow, more = c
+            search = (k < 0) | (ok & ~sufficient(alpha, value) & (k < self.max_linesearch_steps))
+            return jnp.where(grow, more, search)
 
         def body(c):
-            alpha, _, k = c
-            alpha = 0.5 * alpha
-            return alpha, value_at(alpha), k + 1
+            alpha, value, k, grow, more = c
+            t = jnp.where(grow, 2 * alpha, jnp.where(k < 0, 1.0, 0.5 * alpha))
+            trial = value_at(t)
+            # a doubling past the turn limit is not taken
+            trial = jnp.where(grow & (turn(t) > self.max_turn), jnp.inf, trial)
+            better = trial < value - noise
+            keep = grow & ~better
+            alpha, value = jnp.where(keep, alpha, t), jnp.where(keep, value, trial)
+            # the full step passed: doublings from here (k counts halvings, then doublings)
+            start = ~grow & ok & sufficient(t, trial) & (t == 1) & (limit == 1) & grows
+            k = jnp.where(start, 0, k + 1)
+            more = jnp.where(grow, better & (k < self.expansions), start)
+            return alpha, value, k, grow | start, more
 
         one = jnp.ones((), s.u.dtype)
-        alpha, value, _ = jax.lax.while_loop(cond, body, (one, value_at(one), 0))
-        accepted = ok & sufficient(alpha, value)
-        full = accepted & (alpha == 1) & (limit == 1)
-        if self.expansions > 0:
-
-            def grow(c):
-                _, _, better, k = c
-                return full & better & (k < self.expansions)
-
-            def double(c):
-                alpha, value, _, k = c
-                t = 2 * alpha
-                longer = jnp.where(turn(t) <= self.max_turn, value_at(t), jnp.inf)
-                better = longer < value - noise
-                return jnp.where(better, t, alpha), jnp.where(better, longer, value), better, k + 1
-
-            alpha, value, _, _ = jax.lax.while_loop(grow, double, (alpha, value, True, 0))
+        state = (one, jnp.asarray(jnp.inf, s.u.dtype), -1, False, False)
+        alpha, value, _, full, _ = jax.lax.while_loop(cond, body, state)
+        # a doubled step's energy fell below the full step's, which passed
+        accepted = ok & (full | sufficient(alpha, value))
+        if not grows:
+            full = accepted & (alpha == 1) & (limit == 1)
         end = point(alpha)
         move, _ = reframing(end, problem)
         u = jnp.where(unpin, move(end), end) - problem.start
