@@ -67,6 +67,28 @@ def test_a_full_valley_stops_at_thickness(linear_solver):
     assert not bare.contact_forces.any()
 
 
+def test_a_full_valley_with_contact_at_extreme_stiffness_ratios_and_scales():
+    """Bars 1 to 1e8 times the creases' stiffness, sheets 1e-6 and 1e6 wide: a full valley with
+    contact converges within the barrier's reach, apart, in the same shape in units of its
+    size (the barrier's weight and reach scale with the bars and the sheet)."""
+    shapes = []
+    for ratio, scale in ((1.0, 1.0), (1e4, 1.0), (1e8, 1.0), (1.0, 1e-6), (1.0, 1e6)):
+        cp = patterns.single_crease(fold_angle=np.pi, width=scale, height=scale)
+        stiffness = dict(axial=1.0, facet=20.0 / ratio, crease=1.0 / ratio)
+        result = fold(cp, solver=Newton(linear_solver="dense"), contact=True, stiffness=stiffness)
+        assert result.converged, (ratio, scale, result.reason)
+        assert np.all(np.isfinite(result.positions))
+        assert result.contact_dhat == pytest.approx(1e-3 * np.sqrt(2.0) * scale)
+        assert 0.0 < result.contact_min_ratio <= 1.0 and result.contact_pairs >= 1
+        assert np.pi - 0.01 < np.abs(result.fold_angles).max() < np.pi - 1e-4
+        assert len(result.intersections) == 0 and len(result.through_pi) == 0
+        if ratio == 1.0:
+            shapes.append(result.positions / scale)
+    # the same fold at every scale, to the barrier's reach (1e-3 of the sheet)
+    for other in shapes[1:]:
+        np.testing.assert_allclose(other, shapes[0], atol=1e-6)
+
+
 def test_a_fold_held_short_by_contact_says_so():
     # a thickness of a seventh of the sheet's diameter: the halves stop far from flat, at
     # equilibrium, and the advice names contact (not targets that cannot all be met)
