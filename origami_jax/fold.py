@@ -27,6 +27,7 @@ from origami_jax.barrier import HINGE_GAP
 from origami_jax.caches import LruCache
 from origami_jax.contact import (
     Capacity,
+    all_pairs,
     allocate,
     contact_energy,
     contact_mesh,
@@ -891,11 +892,14 @@ def with_contact(
     start (or grown from ``capacity``)."""
     flat = np.asarray(mesh.vertices, np.float64)
     cmesh = contact_mesh(mesh)
+    v, t, e = cmesh.num_vertices, len(cmesh.triangles), len(cmesh.edges)
+    few = v * t + e * (e - 1) // 2 <= CONTACT_ALL_PAIRS
     if dhat is None:
         extent = flat.max(axis=0) - flat.min(axis=0)
         dhat = default_dhat(float(np.linalg.norm(extent)))
-        at_rest = allocate(flat, cmesh, dhat)
-        clearance = float(contact_report(flat, at_rest, dhat).min_ratio) * dhat
+        # a small sheet's every pair, on the host: a broad phase compiles (seconds)
+        at_rest = all_pairs(cmesh, flat) if few else allocate(flat, cmesh, dhat)
+        clearance = float(_contact_report(flat, at_rest, dhat).min_ratio) * dhat
         if clearance < dhat:
             if not clearance > 0:
                 raise PatternError(
@@ -905,8 +909,7 @@ def with_contact(
             dhat = 0.5 * clearance
     skin = CONTACT_SKIN * 2.0 * default_max_step(mesh)
     x0 = flat if start is None else np.asarray(start, np.float64)
-    v, t, e = cmesh.num_vertices, len(cmesh.triangles), len(cmesh.edges)
-    if capacity is None and v * t + e * (e - 1) // 2 <= CONTACT_ALL_PAIRS:
+    if capacity is None and few:
         # room for every pair at once, and for boxes over 16 cells each (the most the broad
         # phase's grid gives on average): a small sheet's pairs never outgrow it (a fold that
         # does starts again, compiling again)
@@ -929,7 +932,7 @@ def contact_summary(x: np.ndarray, pairs, params: FoldParams) -> dict:
     ``pairs`` (gathered there): ``contact_dhat``, ``contact_pairs`` (pairs closer than it) and
     ``contact_min_ratio`` (the least distance of a candidate over it)."""
     dhat = float(params.contact.dhat)
-    report = contact_report(jnp.asarray(x, params.rest_length.dtype), pairs, dhat)
+    report = _contact_report(jnp.asarray(x, params.rest_length.dtype), pairs, dhat)
     return {
         "contact_kappa": float(params.contact.kappa),
         "contact_dhat": dhat,
@@ -999,6 +1002,7 @@ PATH_END = 2.0
 # jitted: run op by op, its dozens of small programs would each compile anew for every shape
 _initial_reference = jax.jit(initial_reference)
 _contact_gradient = jax.jit(jax.grad(contact_energy))
+_contact_report = jax.jit(contact_report)
 
 
 def _shifted(on_chunk, offset: int, iterations: int, sample: dict) -> None:
