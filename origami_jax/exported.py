@@ -20,6 +20,7 @@ import os
 import pickle
 import tempfile
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -28,7 +29,7 @@ import jax
 
 from origami_jax.caches import exported_folder
 
-__all__ = ["compile_stored"]
+__all__ = ["Lowered", "compile_all", "compile_stored", "lower_stored"]
 
 
 @lru_cache(maxsize=1)
@@ -103,8 +104,12 @@ class _Stored:
     def __init__(self, compiled, out_tree, out_avals):
         self._compiled = compiled
         self._out_tree = out_tree
-        # as ``Compiled.out_info``: the outputs' shapes and dtypes
-        self.out_info = jax.tree.unflatten(
+        self.out_info = self.info(out_tree, out_avals)
+
+    @staticmethod
+    def info(out_tree, out_avals):
+        """As ``Compiled.out_info``: the outputs' shapes and dtypes."""
+        return jax.tree.unflatten(
             out_tree, [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in out_avals]
         )
 
@@ -112,18 +117,35 @@ class _Stored:
         return jax.tree.unflatten(self._out_tree, self._compiled(*jax.tree.leaves(args)))
 
 
-def compile_stored(fn: Callable, args: tuple, key: Any, exportable: bool = True) -> Callable:
-    """``fn`` compiled for ``args`` (arrays or ``jax.ShapeDtypeStruct``, any pytree), called
-    like ``fn``, with ``out_info`` (the outputs' shapes and dtypes, as ``jax.stages.Compiled``
-    has). ``key``: what else the program depends on (the function and its settings: hashable,
-    with a ``repr`` that is the same in every process). ``exportable=False``: the program
-    has host callbacks, which ``jax.export`` refuses: compiled as usual.
+class Lowered:
+    """A program lowered by :func:`lower_stored`, not yet compiled: ``out_info`` its outputs'
+    shapes and dtypes; :meth:`compile` gives the callable."""
+
+    def __init__(self, lowered, out_info, wrap: Callable | None = None):
+        self._lowered = lowered
+        self.out_info = out_info
+        self._wrap = wrap
+
+    def compile(self) -> Callable:
+        compiled = self._lowered.compile()
+        return compiled if self._wrap is None else self._wrap(compiled)
+
+
+def lower_stored(fn: Callable, args: tuple, key: Any, exportable: bool = True) -> Lowered:
+    """``fn`` lowered for ``args`` (arrays or ``jax.ShapeDtypeStruct``, any pytree), its program
+    read from the cache folder where stored there (and stored there otherwise); its
+    :meth:`Lowered.compile` is called like ``fn``, with ``out_info`` (the outputs' shapes and
+    dtypes, as ``jax.stages.Compiled`` has). ``key``: what else the program depends on (the
+    function and its settings: hashable, with a ``repr`` that is the same in every process).
+    ``exportable=False``: the program has host callbacks, which ``jax.export`` refuses: lowered
+    as usual.
 
     Without a folder (:func:`origami_jax.caches.use_compilation_cache` not called) or not
-    exportable, this is ``jax.jit(fn).lower(*args).compile()``."""
+    exportable, this is ``jax.jit(fn).lower(*args)``."""
     folder = exported_folder()
     if folder is None or not exportable:
-        return jax.jit(fn).lower(*args).compile()
+        lowered = jax.jit(fn).lower(*args)
+        return Lowered(lowered, lowered.out_info)
     from jax import export
 
     leaves, treedef = jax.tree.flatten(args)
@@ -137,5 +159,23 @@ def compile_stored(fn: Callable, args: tuple, key: Any, exportable: bool = True)
         _write(path, pickle.dumps((out_tree, bytes(exported.serialize()))))
     else:
         exported, out_tree = stored
-    compiled = jax.jit(exported.call).lower(*specs).compile()
-    return _Stored(compiled, out_tree, exported.out_avals)
+    lowered = jax.jit(exported.call).lower(*specs)
+    info = _Stored.info(out_tree, exported.out_avals)
+    return Lowered(lowered, info, lambda c: _Stored(c, out_tree, exported.out_avals))
+
+
+def compile_stored(fn: Callable, args: tuple, key: Any, exportable: bool = True) -> Callable:
+    """:func:`lower_stored` compiled."""
+    return lower_stored(fn, args, key, exportable).compile()
+
+
+def compile_all(programs: list[Lowered]) -> list[Callable]:
+    """Each of ``programs`` compiled, at the same time (XLA compiles outside Python's lock: two
+    programs take about the longer one's time where two cores are free)."""
+    if len(programs) < 2:
+        return [p.compile() for p in programs]
+    pool = ThreadPoolExecutor(max_workers=len(programs))
+    try:
+        return [f.result() for f in [pool.submit(p.compile) for p in programs]]
+    finally:
+        pool.shutdown(wait=False)  # an interrupt is not held up by a compilation under way

@@ -48,7 +48,7 @@ from origami_jax.energy import (
     make_structure,
     needs_barriers,
 )
-from origami_jax.exported import compile_stored
+from origami_jax.exported import compile_all, lower_stored
 from origami_jax.intersections import INTERSECTION_DEPTH, intersecting_pairs
 from origami_jax.metrics import (
     METRIC_NAMES,
@@ -353,12 +353,13 @@ def compiled(solver: Solver, problem, num_edges: int):
     start, advance = solve_fns(solver, num_edges)
     t0 = time.perf_counter()
     exportable = not solver.host_callbacks(problem)
-    start_c = compile_stored(start, (problem,), (repr(solver), "start", num_edges), exportable)
-    state_shape = start_c.out_info[0]  # not traced again
+    start_l = lower_stored(start, (problem,), (repr(solver), "start", num_edges), exportable)
+    state_shape = start_l.out_info[0]  # not traced again
     steps = jax.ShapeDtypeStruct((), jnp.int32)
-    advance_c = compile_stored(
+    advance_l = lower_stored(
         advance, (state_shape, problem, steps), (repr(solver), "advance", num_edges), exportable
     )
+    start_c, advance_c = compile_all([start_l, advance_l])
     compile_time = time.perf_counter() - t0
     _CACHE[cache_key] = (start_c, advance_c)
     return (start_c, advance_c), compile_time

@@ -47,6 +47,26 @@ def test_a_stored_program_is_read_back_not_traced_again(tmp_path, monkeypatch):
     assert len(list(tmp_path.iterdir())) == 3
 
 
+@pytest.mark.parametrize("stored", [False, True])
+def test_programs_lowered_first_compile_together(tmp_path, monkeypatch, stored):
+    """A program's output shapes before it compiles (the next program's arguments), then both
+    compiled at once: the results of each function."""
+    monkeypatch.setattr(exported, "exported_folder", lambda: tmp_path if stored else None)
+    first = exported.lower_stored(_fn, ARGS, ("fn", 1))
+    shapes = first.out_info
+    assert shapes[1].shape == (3,) and shapes[0]["b"].shape == (2, 2)
+
+    def second(tree, n):
+        return tree["sum"] - n
+
+    then = exported.lower_stored(second, (shapes[0], ARGS[1]), ("second", 1))
+    f, g = exported.compile_all([first, then])
+    out = f(*ARGS)
+    assert float(out[0]["sum"]) == 9.0 and np.array_equal(out[1], [1.0, 2.0, 3.0])
+    assert float(g(out[0], ARGS[1])) == 6.0
+    assert len(list(tmp_path.iterdir())) == (2 if stored else 0)
+
+
 def test_a_damaged_file_is_replaced(tmp_path, monkeypatch):
     monkeypatch.setattr(exported, "exported_folder", lambda: tmp_path)
     exported.compile_stored(_fn, ARGS, ("fn", 1))
