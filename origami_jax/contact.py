@@ -667,7 +667,8 @@ def _pair_hessian(
     h = (kappa * b2 * scale * scale) * jnp.outer(g, g)
     if not (isinstance(exact, bool) and not exact):
         curvature = jax.jacfwd(lambda f: gradient(f)[0])(q.reshape(12))
-        h = h + (kappa * b1 * scale * jnp.asarray(exact, h.dtype)) * curvature
+        # (where, not a product: a member without exact attempts keeps its convex part)
+        h = h + jnp.where(exact, kappa * b1 * scale * curvature, 0.0)
     h = jnp.where(on & jnp.all(jnp.isfinite(h)), h, 0.0)  # a degenerate pair: no curvature
     return h.reshape(4, 3, 4, 3).transpose(0, 2, 1, 3)
 

@@ -29,7 +29,7 @@ import jax
 
 from origami_jax.caches import exported_folder
 
-__all__ = ["Lowered", "compile_all", "compile_stored", "lower_stored"]
+__all__ = ["LoweredProgram", "compile_all", "compile_stored", "lower_stored"]
 
 
 @lru_cache(maxsize=1)
@@ -117,7 +117,7 @@ class _Stored:
         return jax.tree.unflatten(self._out_tree, self._compiled(*jax.tree.leaves(args)))
 
 
-class Lowered:
+class LoweredProgram:
     """A program lowered by :func:`lower_stored`, not yet compiled: ``out_info`` its outputs'
     shapes and dtypes; :meth:`compile` gives the callable."""
 
@@ -131,10 +131,10 @@ class Lowered:
         return compiled if self._wrap is None else self._wrap(compiled)
 
 
-def lower_stored(fn: Callable, args: tuple, key: Any, exportable: bool = True) -> Lowered:
+def lower_stored(fn: Callable, args: tuple, key: Any, exportable: bool = True) -> LoweredProgram:
     """``fn`` lowered for ``args`` (arrays or ``jax.ShapeDtypeStruct``, any pytree), its program
     read from the cache folder where stored there (and stored there otherwise); its
-    :meth:`Lowered.compile` is called like ``fn``, with ``out_info`` (the outputs' shapes and
+    :meth:`LoweredProgram.compile` is called like ``fn``, with ``out_info`` (the outputs' shapes and
     dtypes, as ``jax.stages.Compiled`` has). ``key``: what else the program depends on (the
     function and its settings: hashable, with a ``repr`` that is the same in every process).
     ``exportable=False``: the program has host callbacks, which ``jax.export`` refuses: lowered
@@ -145,7 +145,7 @@ def lower_stored(fn: Callable, args: tuple, key: Any, exportable: bool = True) -
     folder = exported_folder()
     if folder is None or not exportable:
         lowered = jax.jit(fn).lower(*args)
-        return Lowered(lowered, lowered.out_info)
+        return LoweredProgram(lowered, lowered.out_info)
     from jax import export
 
     leaves, treedef = jax.tree.flatten(args)
@@ -161,7 +161,7 @@ def lower_stored(fn: Callable, args: tuple, key: Any, exportable: bool = True) -
         exported, out_tree = stored
     lowered = jax.jit(exported.call).lower(*specs)
     info = _Stored.info(out_tree, exported.out_avals)
-    return Lowered(lowered, info, lambda c: _Stored(c, out_tree, exported.out_avals))
+    return LoweredProgram(lowered, info, lambda c: _Stored(c, out_tree, exported.out_avals))
 
 
 def compile_stored(fn: Callable, args: tuple, key: Any, exportable: bool = True) -> Callable:
@@ -169,7 +169,7 @@ def compile_stored(fn: Callable, args: tuple, key: Any, exportable: bool = True)
     return lower_stored(fn, args, key, exportable).compile()
 
 
-def compile_all(programs: list[Lowered]) -> list[Callable]:
+def compile_all(programs: list[LoweredProgram]) -> list[Callable]:
     """Each of ``programs`` compiled, at the same time (XLA compiles outside Python's lock: two
     programs take about the longer one's time where two cores are free)."""
     if len(programs) < 2:
@@ -178,4 +178,5 @@ def compile_all(programs: list[Lowered]) -> list[Callable]:
     try:
         return [f.result() for f in [pool.submit(p.compile) for p in programs]]
     finally:
-        pool.shutdown(wait=False)  # an interrupt is not held up by a compilation under way
+        # an interrupt returns at once (a compilation under way ends in its thread)
+        pool.shutdown(wait=False)

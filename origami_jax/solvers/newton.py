@@ -641,7 +641,7 @@ class Newton(Solver):
             t = jnp.where(grow, 2 * alpha, jnp.where(k < 0, 1.0, 0.5 * alpha))
             trial = value_at(t)
             # a doubling past the turn limit is not taken
-            trial = jnp.where(grow & (turn(t) > self.max_turn), jnp.inf, trial)
+            trial = jnp.where(grow & ~(turn(t) <= self.max_turn), jnp.inf, trial)
             better = trial < value - noise
             keep = grow & ~better
             alpha, value = jnp.where(keep, alpha, t), jnp.where(keep, value, trial)
@@ -652,7 +652,7 @@ class Newton(Solver):
             return alpha, value, k, grow | start, more
 
         one = jnp.ones((), s.u.dtype)
-        state = (one, jnp.asarray(jnp.inf, s.u.dtype), -1, False, False)
+        state = (one, jnp.full_like(s.energy, jnp.inf), -1, False, False)
         alpha, value, _, full, _ = jax.lax.while_loop(cond, body, state)
         # a doubled step's energy fell below the full step's, which passed
         accepted = ok & (full | sufficient(alpha, value))
