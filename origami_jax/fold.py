@@ -188,7 +188,7 @@ class FoldResult:
         x = np.asarray(self.positions)
         if self.contact_dhat is None:
             return np.zeros_like(x)
-        pairs = allocate(x, contact_mesh(self.pattern.mesh), self.contact_dhat)
+        pairs = _pairs_within(x, contact_mesh(self.pattern.mesh), self.contact_dhat)
         grad = _contact_gradient(jnp.asarray(x), pairs, self.contact_dhat, self.contact_kappa)
         return -np.asarray(grad, np.float64)
 
@@ -893,13 +893,10 @@ def with_contact(
     start (or grown from ``capacity``)."""
     flat = np.asarray(mesh.vertices, np.float64)
     cmesh = contact_mesh(mesh)
-    v, t, e = cmesh.num_vertices, len(cmesh.triangles), len(cmesh.edges)
-    few = v * t + e * (e - 1) // 2 <= CONTACT_ALL_PAIRS
     if dhat is None:
         extent = flat.max(axis=0) - flat.min(axis=0)
         dhat = default_dhat(float(np.linalg.norm(extent)))
-        # a small sheet's every pair, on the host: a broad phase compiles (seconds)
-        at_rest = all_pairs(cmesh, flat) if few else allocate(flat, cmesh, dhat)
+        at_rest = _pairs_within(flat, cmesh, dhat)
         clearance = float(_contact_report(flat, at_rest, dhat).min_ratio) * dhat
         if clearance < dhat:
             if not clearance > 0:
@@ -910,11 +907,12 @@ def with_contact(
             dhat = 0.5 * clearance
     skin = CONTACT_SKIN * 2.0 * default_max_step(mesh)
     x0 = flat if start is None else np.asarray(start, np.float64)
-    if capacity is None and few:
+    if capacity is None and _few_pairs(cmesh):
         # room for every pair at once, and for boxes over 16 cells each (the most the broad
         # phase's grid gives on average): a small sheet's pairs never outgrow it (a fold that
         # does starts again, compiling again)
-        pt, ee = v * t, e * (e - 1) // 2
+        t, e = len(cmesh.triangles), len(cmesh.edges)
+        pt, ee = cmesh.num_vertices * t, e * (e - 1) // 2
         # (an edge pair can be met in several cells before the exact test: raw room to spare)
         capacity = Capacity(16 * t, 4 * pt, pt, 16 * e, 16 * ee, ee)
     pairs = allocate(x0, cmesh, dhat + skin, capacity, multiplier=CONTACT_ROOM)
@@ -926,6 +924,18 @@ def with_contact(
         structure, contact=jax.tree.map(jnp.asarray, cmesh), contact_capacity=pairs.capacity
     )
     return structure, params._replace(contact=contact)
+
+
+def _few_pairs(cmesh) -> bool:
+    """Whether a sheet has at most :data:`CONTACT_ALL_PAIRS` pairs of primitives."""
+    v, t, e = cmesh.num_vertices, len(cmesh.triangles), len(cmesh.edges)
+    return v * t + e * (e - 1) // 2 <= CONTACT_ALL_PAIRS
+
+
+def _pairs_within(x: np.ndarray, cmesh, dhat: float):
+    """Candidate pairs of positions ``x`` that hold every pair within ``dhat``: a small sheet's
+    every pair, from the host (a broad phase compiles, seconds), else the broad phase's."""
+    return all_pairs(cmesh, x) if _few_pairs(cmesh) else allocate(x, cmesh, dhat)
 
 
 def contact_summary(x: np.ndarray, pairs, params: FoldParams) -> dict:
