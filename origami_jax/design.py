@@ -52,8 +52,15 @@ import numpy as np
 from jax import Array
 from jax.tree_util import Partial
 
-from origami_jax.energy import Barriers, FoldParams, Reference, make_params, make_structure
-from origami_jax.fold import checked_start, default_tol
+from origami_jax.energy import (
+    Barriers,
+    ContactParams,
+    FoldParams,
+    Reference,
+    make_params,
+    make_structure,
+)
+from origami_jax.fold import checked_start, default_tol, with_contact
 from origami_jax.pattern import CreasePattern
 from origami_jax.solvers import Solver, Status, get_solver, hostsparse
 from origami_jax.solvers.assembly import gauged_hessian
@@ -216,13 +223,35 @@ def _implicit_jvp(primals, tangents):
         hw = jax.jvp(lambda y: jax.grad(objective)(y, problem, reference), (u,), (w,))[1]
         return hw + w - project(w)
 
-    u_dot = jax.lax.custom_linear_solve(
-        matvec,
-        -f_dot,
-        lambda _, b: _linear_solve(problem, factor, b),
-        symmetric=True,
-    )
+    def solve(_, b):
+        return _linear_solve(problem, factor, b)
+
+    layout: HessianLayout = problem.aux
+    if layout.sparse and problem.structure.contact is not None:
+        # the sparse factor holds each contact pair's curvature on its corners' diagonal blocks
+        # only (the sheet's sparsity): a preconditioner, refined to the exact Hessian by CG
+        solve = functools.partial(_refined_solve, matvec, solve)
+    u_dot = jax.lax.custom_linear_solve(matvec, -f_dot, solve, symmetric=True)
     return positions(problem, u), project(u_dot) * scale
+
+
+#: relative residual to which the implicit derivative's conjugate gradients solve (sparse
+#: layouts with contact), and their most iterations
+CG_TOL = 1e-12
+CG_MAX_ITER = 200
+
+
+def _refined_solve(matvec: Callable, precondition: Callable, _, b: Array) -> Array:
+    """``H^-1 b`` by conjugate gradients on the exact ``matvec``, preconditioned by the factored
+    approximation; NaN where they do not reach :data:`CG_TOL` (never a silent wrong
+    derivative)."""
+    tol = jnp.maximum(CG_TOL, 100 * jnp.finfo(b.dtype).eps)
+    sol, _ = jax.scipy.sparse.linalg.cg(
+        matvec, b, M=lambda r: precondition(None, r), tol=tol, maxiter=CG_MAX_ITER
+    )
+    res = jnp.max(jnp.abs(b - matvec(sol)))
+    ok = res <= 10 * tol * jnp.maximum(jnp.max(jnp.abs(b)), jnp.finfo(b.dtype).tiny)
+    return jnp.where(ok, sol, jnp.nan)
 
 
 def _projectors(start: Array, triangles: Array) -> Array:
@@ -239,6 +268,7 @@ def equilibrium_fn(
     max_iter: int = 500,
     strict: bool = True,
     barriers: Barriers | bool | None = None,
+    contact: bool | float = False,
 ) -> Equilibrium:
     """A differentiable equilibrium of ``pattern``: ``solve(params, start=None)``.
 
@@ -261,6 +291,12 @@ def equilibrium_fn(
       barriers: as in :func:`~origami_jax.fold` (default: where the scene needs them); the
         derivatives include theirs. The solve is direct (from ``start``): warm starts follow
         a design's path.
+      contact: self-contact, as in :func:`~origami_jax.fold` (``True``: the default reach
+        ``dhat``; a number: that ``dhat``); its barrier is in the energy and in the
+        derivatives, over candidate pairs gathered at the start of each solve (their capacity
+        fixed here: a solve whose pairs outgrow it ends with status ``CONTACT_OVERFLOW``, not
+        ``ok``). Parameters whose ``contact`` is ``None`` take the barrier's reach and weight
+        fixed here (:attr:`Equilibrium.contact`).
 
     Returns:
       An :class:`Equilibrium` ``solve``, called as ``solve(params, start=None) -> (positions,
@@ -286,6 +322,20 @@ def equilibrium_fn(
     structure = make_structure(mesh, barriers)
     start = checked_start(pattern, None)  # the pattern's pre-folded start, else flat
     default_start = mesh.vertices if start is None else start
+    contact_params = None
+    if contact is not False:
+        if not solver_obj.supports_contact:
+            raise ValueError(
+                f"contact: solver {solver_obj.name!r} does not bound its steps among contact "
+                "pairs (Solver.supports_contact); newton, lbfgs and dynamics do"
+            )
+        dhat = None if contact is True else float(contact)
+        if dhat is not None and not (np.isfinite(dhat) and dhat > 0):
+            raise ValueError(f"contact: dhat must be finite and > 0, got {contact}")
+        structure, with_params = with_contact(
+            mesh, structure, make_params(pattern), dhat, default_start
+        )
+        contact_params = with_params.contact
     pinned, _ = rigid_gauge(mesh, default_start)
     # the solver's host-side data (Newton: the Hessian layout), built once
     probe = Problem(
@@ -309,6 +359,7 @@ def equilibrium_fn(
         max_step=jnp.asarray(default_max_step(mesh)),
         solver_aux=solver_aux,
         layout=layout,
+        contact=contact_params,
         solver=solver_obj,
         tol=tol,
         max_iter=int(max_iter),
@@ -327,6 +378,7 @@ def equilibrium_fn(
         "max_step",
         "solver_aux",
         "layout",
+        "contact",
     ],
     meta_fields=["solver", "tol", "max_iter", "strict"],
 )
@@ -348,6 +400,7 @@ class Equilibrium:
     max_step: Array
     solver_aux: Any
     layout: Any  # Newton's Hessian layout where the solver's own aux is not one, else None
+    contact: ContactParams | None  # the barrier's reach and weight for params without them
     solver: Solver
     tol: float | None
     max_iter: int
@@ -372,6 +425,8 @@ class Equilibrium:
     ) -> tuple[Array, EquilibriumInfo]:
         dtype = params.rest_length.dtype
         tol = default_tol(dtype) if self.tol is None else self.tol
+        if self.contact is not None and params.contact is None:
+            params = params._replace(contact=jax.tree.map(lambda a: a.astype(dtype), self.contact))
         fixed = jax.lax.stop_gradient(params)
         start = self.default_start if start is None else jax.lax.stop_gradient(start)
         # the force scale: the energy's gradient on the flat sheet (fold()'s grad_max0)
@@ -617,6 +672,7 @@ def design(
     ftol: float = 0.0,
     solver: str | Solver = "newton",
     max_iter: int = 500,
+    contact: bool | float = False,
 ) -> DesignResult:
     """Optimise a pattern's crease targets (or any parametrisation) for a goal on the folded
     state; each solve warm-starts from the last equilibrium.
@@ -640,7 +696,7 @@ def design(
       gtol: stop once the gradient's max-abs is below this.
       xtol: stop once a step moves no variable by more than this (Gauss-Newton).
       ftol: stop once the loss is at or below this.
-      solver, max_iter: as for :func:`equilibrium_fn`.
+      solver, max_iter, contact: as for :func:`equilibrium_fn`.
 
     Returns:
       A :class:`DesignResult`. The loop stops early (and says why) when a solve is not ``ok``.
@@ -654,7 +710,7 @@ def design(
       >>> r.loss < 1e-8
       True
     """
-    solve = equilibrium_fn(pattern, solver=solver, tol=tol, max_iter=max_iter)
+    solve = equilibrium_fn(pattern, solver=solver, tol=tol, max_iter=max_iter, contact=contact)
     base = make_params(pattern) if params is None else params
     dtype = base.rest_length.dtype
     objective = _as_tree(objective)

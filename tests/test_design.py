@@ -381,3 +381,64 @@ def test_design_calls_reuse_the_compiled_solve():
     for r in (first, other_goal, other_pattern):
         assert bool(r.info.ok) and r.loss < 1e-8, r.reason
     assert not np.allclose(other_goal.variables, first.variables)
+
+
+def test_gradient_through_contact_matches_central_differences():
+    """A full valley held short of flat by contact: where it stops moves with the crease's
+    target and stiffness and with the facets' through the barrier's force; the implicit
+    derivative (the barrier's exact Hessian in it) matches central differences."""
+    from origami_jax.contact import all_pairs, contact_mesh, contact_report
+
+    cp = patterns.single_crease(fold_angle=np.pi)
+    solve = equilibrium_fn(cp, solver=Newton(linear_solver="dense"), tol=TOL, contact=True)
+    params = make_params(cp)
+    w = jnp.asarray(np.random.default_rng(3).normal(size=(cp.mesh.num_vertices, 3)))
+
+    def unflat(v):
+        stiff = params.stiffness._replace(crease=v[1], facet=v[2])
+        return params._replace(target=params.target.at[0].set(v[0]), stiffness=stiff)
+
+    def loss(v):
+        x, info = solve(unflat(v))  # from flat, directly
+        return jnp.vdot(w, x), (x, info)
+
+    value_and_grad = jax.jit(jax.value_and_grad(loss, has_aux=True))
+    v0 = jnp.asarray([params.target[0], params.stiffness.crease, params.stiffness.facet])
+    (_, (x0, info)), g = value_and_grad(v0)
+    assert bool(info.ok), info
+    # the barrier holds it: pairs within reach, the crease short of pi
+    dhat = float(solve.contact.dhat)
+    report = contact_report(x0, all_pairs(contact_mesh(cp.mesh), np.asarray(x0)), dhat)
+    assert int(report.num_active) >= 1 and 0.0 < float(report.min_ratio) < 1.0
+    fd = fd_gradient(lambda v: value_and_grad(v)[0][0], v0, h=1e-6)
+    err = np.max(np.abs(np.asarray(g) - fd)) / np.max(np.abs(fd))
+    print(f"gradient through contact vs central differences, relative error {err:.2e}")
+    assert err < 1e-6, (err, g, fd)
+
+
+def test_refined_solve_reaches_the_exact_system_from_an_approximate_factor():
+    """Sparse layouts with contact: the factored sheet holds each pair's curvature on its
+    corners' diagonal blocks only; conjugate gradients on the exact Hessian, preconditioned by
+    it, solve the exact system, and give NaN (not a wrong derivative) where they cannot."""
+    from origami_jax.design import _refined_solve
+
+    rng = np.random.default_rng(4)
+    q = rng.normal(size=(12, 12))
+    a = jnp.asarray(q @ q.T + 12 * np.eye(12))  # positive definite
+    approx = jnp.diag(jnp.diag(a))  # its diagonal only: a preconditioner
+    b = jnp.asarray(rng.normal(size=(4, 3)))
+
+    def matvec(v):
+        return (a @ v.reshape(-1)).reshape(v.shape)
+
+    def precondition(_, r):
+        return jnp.linalg.solve(approx, r.reshape(-1)).reshape(r.shape)
+
+    x = _refined_solve(matvec, precondition, None, b)
+    np.testing.assert_allclose(x.reshape(-1), np.linalg.solve(a, b.reshape(-1)), rtol=1e-10)
+    # singular, with b outside its range: no solution, and NaN says so
+    u, _, _ = np.linalg.svd(q)
+    bad = jnp.asarray(u @ np.diag(np.r_[0.0, np.ones(11)]) @ u.T)
+    b = jnp.asarray(u[:, 0].reshape(4, 3))
+    x = _refined_solve(lambda v: (bad @ v.reshape(-1)).reshape(v.shape), precondition, None, b)
+    assert np.all(np.isnan(np.asarray(x)))
