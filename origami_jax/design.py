@@ -89,6 +89,7 @@ __all__ = [
     "target_distance",
     "target_surface",
     "kabsch",
+    "not_ok_reason",
     "DesignResult",
     "design",
 ]
@@ -613,6 +614,25 @@ class DesignResult(NamedTuple):
     reason: str
 
 
+def not_ok_reason(info: EquilibriumInfo, tol: float | None = None) -> str:
+    """Why a solve of :func:`equilibrium_fn` is not ``ok``, in words (``tol``: the solve's
+    tolerance, default that of the dtype): how the solver stopped, or the instability."""
+    if not bool(info.converged):
+        dtype = jnp.asarray(info.grad_norm_rel).dtype
+        status = Status(int(info.status))
+        why = status.describe(
+            float(info.grad_norm_rel),
+            default_tol(dtype) if tol is None else tol,
+            int(info.iterations),
+        )
+        return f"equilibrium not ok: {why}"
+    return (
+        "equilibrium not ok: unstable, the Hessian there is not positive definite (smallest "
+        f"over largest pivot {float(info.pivot_rel):.1e}): no derivative; another start or "
+        "other parameters may reach a stable state"
+    )
+
+
 def _loss(residual: Array) -> Array:
     """A scalar objective as it is, a vector of residuals as ``1/2 sum r^2``."""
     return residual if jnp.ndim(residual) == 0 else 0.5 * jnp.sum(residual * residual)
@@ -754,7 +774,7 @@ def design(
             losses.append(value)
             gnorms.append(float(jnp.max(jnp.abs(g))))
             if not bool(info.ok):
-                reason = "equilibrium not ok (not converged or unstable): see info"
+                reason = not_ok_reason(info, tol)
                 break
             if gnorms[-1] <= gtol or value <= ftol:
                 reason = f"gradient {gnorms[-1]:.2e} <= gtol {gtol:.1e} or loss <= ftol {ftol:.1e}"
@@ -794,7 +814,7 @@ def design(
             losses.append(float(value))
             gnorms.append(float(jnp.max(jnp.abs(g))))
             if not bool(info.ok):
-                reason = "equilibrium not ok (not converged or unstable): see info"
+                reason = not_ok_reason(info, tol)
                 break
             if gnorms[-1] <= gtol or float(value) <= ftol:
                 reason = f"gradient {gnorms[-1]:.2e} <= gtol {gtol:.1e} or loss <= ftol {ftol:.1e}"

@@ -442,3 +442,28 @@ def test_refined_solve_reaches_the_exact_system_from_an_approximate_factor():
     b = jnp.asarray(u[:, 0].reshape(4, 3))
     x = _refined_solve(lambda v: (bad @ v.reshape(-1)).reshape(v.shape), precondition, None, b)
     assert np.all(np.isnan(np.asarray(x)))
+
+
+def test_a_solve_that_is_not_ok_says_why_in_words():
+    from origami_jax.design import EquilibriumInfo, not_ok_reason
+    from origami_jax.solvers import Status
+
+    def info(converged, status, stable=True):
+        return EquilibriumInfo(
+            converged=jnp.asarray(converged),
+            status=jnp.asarray(status, jnp.int32),
+            iterations=jnp.asarray(7),
+            grad_norm_rel=jnp.asarray(3e-4),
+            energy=jnp.asarray(0.5),
+            stable=jnp.asarray(stable),
+            pivot_rel=jnp.asarray(-2e-3),
+        )
+
+    assert not_ok_reason(info(False, Status.MAX_ITER), 1e-10) == (
+        "equilibrium not ok: iteration limit 7 reached: grad_norm_rel 3.00e-04 > tol 1.0e-10"
+    )
+    assert "more contact pairs than their capacity" in not_ok_reason(
+        info(False, Status.CONTACT_OVERFLOW)
+    )
+    unstable = not_ok_reason(info(True, Status.CONVERGED, stable=False))
+    assert "unstable" in unstable and "-2.0e-03" in unstable
