@@ -60,7 +60,7 @@ from origami_jax.energy import (
     make_params,
     make_structure,
 )
-from origami_jax.fold import checked_start, default_tol, with_contact
+from origami_jax.fold import checked_start, contact_reach, default_tol, with_contact
 from origami_jax.pattern import CreasePattern
 from origami_jax.solvers import Solver, Status, get_solver, hostsparse
 from origami_jax.solvers.assembly import gauged_hessian
@@ -325,14 +325,7 @@ def equilibrium_fn(
     default_start = mesh.vertices if start is None else start
     contact_params = None
     if contact is not False:
-        if not solver_obj.supports_contact:
-            raise ValueError(
-                f"contact: solver {solver_obj.name!r} does not bound its steps among contact "
-                "pairs (Solver.supports_contact); newton, lbfgs and dynamics do"
-            )
-        dhat = None if contact is True else float(contact)
-        if dhat is not None and not (np.isfinite(dhat) and dhat > 0):
-            raise ValueError(f"contact: dhat must be finite and > 0, got {contact}")
+        dhat = contact_reach(contact, solver_obj)
         structure, with_params = with_contact(
             mesh, structure, make_params(pattern), dhat, default_start
         )

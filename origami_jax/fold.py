@@ -624,7 +624,8 @@ def fold(
       contact: self-contact (:mod:`origami_jax.contact`): faces that share no vertex are kept
         apart by a barrier, and no step passes one through another. ``True``: the default
         reach ``dhat`` (the gap folded layers keep: :func:`with_contact`); a number: that
-        ``dhat``, pattern units; ``False`` (default): none. Newton only.
+        ``dhat``, pattern units; ``False`` (default): none. For solvers that bound their
+        steps among contact pairs (``Solver.supports_contact``: Newton, L-BFGS, dynamics).
 
     Returns:
       A :class:`FoldResult`; it never holds NaN positions: a solve that meets a non-finite value
@@ -660,14 +661,7 @@ def fold(
         percent = float(params.percent)
     if path not in ("auto", "direct", "continuation"):
         raise ValueError(f"path must be 'auto', 'direct' or 'continuation', got {path!r}")
-    if contact is not False and not solver_obj.supports_contact:
-        raise ValueError(
-            f"contact: solver {solver_obj.name!r} does not bound its steps among contact "
-            f"pairs (Solver.supports_contact); newton, lbfgs and dynamics do"
-        )
-    if contact is not False and contact is not True:
-        if not (np.isfinite(float(contact)) and float(contact) > 0):
-            raise ValueError(f"contact: dhat must be finite and > 0, got {contact}")
+    dhat = None if contact is False else contact_reach(contact, solver_obj)
     # a direct solve chosen by "auto" that ends with a warning sign is followed again from flat
     retry = False
     if path == "auto":
@@ -691,7 +685,6 @@ def fold(
         structure = make_structure(mesh, which)
         if contact is False:
             return structure, params
-        dhat = None if contact is True else float(contact)
         return with_contact(mesh, structure, params, dhat, start, room[-1] if room else None)
 
     lost = 0.0  # the time of tries whose contact pairs outgrew their room (compiling included)
@@ -870,6 +863,22 @@ class _ContactOverflow(Exception):
     def __init__(self, capacity: Capacity):
         super().__init__(f"contact pairs outgrew their capacity: now {capacity}")
         self.capacity = capacity
+
+
+def contact_reach(contact: bool | float, solver: Solver) -> float | None:
+    """The reach ``dhat`` that ``contact=True`` or ``contact=<dhat>`` asks for (``None``: the
+    default, :func:`with_contact`'s), checked: a solver that does not bound its steps among
+    contact pairs, or a reach that is not finite and > 0, is refused (``ValueError``)."""
+    if not solver.supports_contact:
+        raise ValueError(
+            f"contact: solver {solver.name!r} does not bound its steps among contact "
+            f"pairs (Solver.supports_contact); newton, lbfgs and dynamics do"
+        )
+    if contact is True:
+        return None
+    if not (np.isfinite(float(contact)) and float(contact) > 0):
+        raise ValueError(f"contact: dhat must be finite and > 0, got {contact}")
+    return float(contact)
 
 
 def with_contact(

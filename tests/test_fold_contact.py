@@ -215,11 +215,15 @@ def test_contact_switches_and_bad_values():
     class Unbounded(Lbfgs):  # a solver that does not limit its steps among contact pairs
         supports_contact = False
 
-    with pytest.raises(ValueError, match="does not bound its steps among contact pairs"):
-        fold(cp, solver=Unbounded(), contact=True)
-    for bad in (0.0, -1.0, float("nan")):
-        with pytest.raises(ValueError, match="dhat must be finite and > 0"):
-            fold(cp, contact=bad)
+    from origami_jax.design import equilibrium_fn
+
+    # refused alike by fold and by the design's equilibrium, before anything compiles
+    for build in (fold, equilibrium_fn):
+        with pytest.raises(ValueError, match="does not bound its steps among contact pairs"):
+            build(cp, solver=Unbounded(), contact=True)
+        for bad in (0.0, -1.0, float("nan")):
+            with pytest.raises(ValueError, match="dhat must be finite and > 0"):
+                build(cp, contact=bad)
     bare = fold(patterns.single_crease(fold_angle=1.0))
     assert bare.contact_dhat is None and bare.contact_pairs == 0
 
