@@ -315,22 +315,22 @@ def _closest_distance(cases: Callable) -> Callable:
 
     @distance.defjvp
     def _(corners, tangents):
-        d2, w, r = _closest(cases, corners)
-        rate = sum(w[..., k] * _dot(r, tangents[k]) for k in range(4))
-        return d2, 2.0 * rate
+        d2, g = _closest_gradient(cases, corners)
+        return d2, sum(_dot(g[..., k, :], tangents[k]) for k in range(4))
 
     return distance
 
 
-def _closest(cases: Callable, corners: tuple) -> tuple[Array, Array, Array]:
-    """``(d2, w, r)``: the squared distance of the realised case of least distance of
-    ``cases`` at ``corners`` (4 arrays (..., 3)), its weights ``w`` (..., 4) and the vector
-    ``r = sum_k w_k x_k`` (..., 3) between its closest points."""
+def _closest_gradient(cases: Callable, corners: tuple) -> tuple[Array, Array]:
+    """``(d2, g)``: the squared distance of the realised case of least distance of ``cases`` at
+    ``corners`` (4 arrays (..., 3)) and its gradient ``g`` (..., 4, 3), ``2 w_k r`` in corner
+    ``k`` (``w`` the case's weights, ``r = sum_k w_k x_k`` the vector between its closest
+    points)."""
     values, ok, weights = cases(*corners)
     case = _classify(values, ok)
     w = jnp.take_along_axis(weights, case[..., None, None], axis=-2)[..., 0, :]
     r = sum(w[..., k, None] * corners[k] for k in range(4))
-    return _select(values, case), w, r
+    return _select(values, case), 2.0 * w[..., :, None] * r[..., None, :]
 
 
 _point_triangle_distance_sq = _closest_distance(_point_triangle_cases)
@@ -656,10 +656,10 @@ def _pair_hessian(
     cases = _point_triangle_cases if kind == 1 else _edge_edge_cases
 
     def gradient(f: Array) -> tuple[Array, Array]:
-        # the squared distance's gradient (_closest_distance), written out: its Jacobian
+        # the squared distance's gradient, as its derivative rule has it: its Jacobian
         # (forward mode only) is the distance's Hessian
-        d2, w, r = _closest(cases, tuple(f.reshape(4, 3)))
-        return 2.0 * (w[:, None] * r).reshape(12), d2
+        d2, g = _closest_gradient(cases, tuple(f.reshape(4, 3)))
+        return g.reshape(12), d2
 
     g, d2 = gradient(q.reshape(12))
     scale = 1.0 / (dhat * dhat)
