@@ -62,6 +62,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from origami_jax.caches import LruCache
+from origami_jax.contact import Capacity
 from origami_jax.energy import (
     FoldParams,
     Stiffness,
@@ -74,9 +75,15 @@ from origami_jax.fold import (
     HISTORY_FIELDS,
     FoldResult,
     checked_start,
+    contact_capacity,
+    contact_reach,
+    contact_settings,
+    contact_summary,
     default_tol,
+    fold,
     measured,
     next_chunk,
+    pairs_within,
     signature,
     stop_reason,
 )
@@ -296,6 +303,7 @@ def fold_batch(
     max_time: float | None = None,
     share_topology: bool | None = None,
     processes: bool | None = None,
+    contact: bool | float = False,
 ) -> list[FoldResult | None]:
     """Fold many problems in vmapped, compiled solves; one :class:`FoldResult` per problem.
 
@@ -326,6 +334,12 @@ def fold_batch(
         process folds all the problems it was given, alone. Shared, the call is a collective:
         every process calls it with the same problems and options, in the same order of calls
         (a process given other problems raises ``ValueError`` in all of them).
+      contact: self-contact, as in :func:`~origami_jax.fold` (``True``: each pattern's default
+        reach; a number: that ``dhat``; ``False``, the default: none). Each problem is padded
+        to its size bucket with its contact mesh and room for its candidate pairs (the
+        padding is inert to contact); a problem whose pairs outgrow that room is folded again
+        alone with :func:`~origami_jax.fold`, which grows it. Problems are solved directly
+        (``fold``'s ``path="direct"``), never with shared index arrays.
 
     Returns:
       A list in input order. A problem's result equals folding it alone (to the rounding of a
@@ -386,7 +400,13 @@ def fold_batch(
         processes = jax.process_count() > 1
     processes = bool(processes) and jax.process_count() > 1
 
+    dhat = None if contact is False else contact_reach(contact, solver_obj)
+    if contact is not False and share_topology:
+        raise ValueError("fold_batch(): contact pads each problem; share_topology=True cannot")
     members = _members(patterns, percents, stiffnesses, start_list, tol)
+    if contact is not False:
+        members = _with_contact(members, dhat)
+        share_topology = False
     count = Counter(m.topology for m in members)
     # key: (sizes compiled for, topology if shared else None)
     groups: dict[tuple[BatchSizes, tuple | None], list[_Member]] = {}
@@ -400,7 +420,9 @@ def fold_batch(
     for to, _ in groups:
         solver_obj.check_batch(to.vertices)
     if processes:
-        _check_same_problems(members, solver_obj, dtype, max_iter, max_time, share_topology)
+        _check_same_problems(
+            members, solver_obj, dtype, max_iter, max_time, share_topology, contact
+        )
         # each process takes every P-th problem of each group in queue order (those that fold
         # furthest first), so every process gets as many of the long ones as of the short
         me, count_processes = jax.process_index(), jax.process_count()
@@ -408,6 +430,8 @@ def fold_batch(
         groups = {key: group for key, group in groups.items() if group}
     plan = []
     for (to, topology), group in groups.items():
+        if contact is not False:
+            group = _with_capacity(group, to, solver_obj)
         size = _chunk_size(chunk_size, len(group), solver_obj, to, devices)
         plan.append((to, group, size, topology is not None))
 
@@ -445,6 +469,8 @@ def fold_batch(
     finally:
         if bar is not None:
             bar.close()
+    if contact is not False and not interrupted:
+        _refold_overflowed(results, members, solver_obj, tol, max_iter, dtype, max_time)
     stopped = []  # the other processes that were interrupted
     if processes:
         try:
@@ -463,16 +489,86 @@ def fold_batch(
     return results
 
 
+def _with_contact(members: list[_Member], dhat: float | None) -> list[_Member]:
+    """The members with self-contact (:func:`~origami_jax.fold.contact_settings`): the
+    contact mesh in their structures (its capacity set per group: :func:`_with_capacity`) and
+    the barrier's parameters in theirs; the default reach computed once per sheet."""
+    reaches: dict[tuple, float] = {}
+    out = []
+    for m in members:
+        mesh = m.pattern.mesh
+        key = (m.topology, np.asarray(mesh.vertices).tobytes())
+        reach = dhat if dhat is not None else reaches.get(key)
+        cmesh, params = contact_settings(mesh, m.problem.params, reach)
+        reaches.setdefault(key, float(params.dhat))
+        problem = replace(
+            m.problem,
+            structure=replace(m.problem.structure, contact=cmesh),
+            params=m.problem.params._replace(contact=params),
+        )
+        sizes = m.sizes._replace(
+            contact_triangles=len(cmesh.triangles), contact_edges=len(cmesh.edges)
+        )
+        out.append(m._replace(problem=problem, sizes=sizes))
+    return out
+
+
+def _with_capacity(group: list[_Member], to: BatchSizes, solver: Solver) -> list[_Member]:
+    """The members of one bucket, each with the contact pairs' capacity that holds every
+    member's at its start (:func:`~origami_jax.fold.contact_capacity` of the padded problems:
+    the compiled solve has one)."""
+    capacities = []
+    for m in group:
+        padded = pad_problem(m.problem, m.sizes, to)
+        c = padded.params.contact
+        radius = float(c.dhat) + float(c.skin)
+        capacities.append(contact_capacity(padded.structure.contact, padded.start, radius))
+    capacity = Capacity(*np.max(np.array(capacities), axis=0).tolist())
+    return [
+        m._replace(
+            problem=replace(
+                m.problem, structure=replace(m.problem.structure, contact_capacity=capacity)
+            )
+        )
+        for m in group
+    ]
+
+
+def _refold_overflowed(results, members, solver, tol, max_iter, dtype, max_time) -> None:
+    """Each result that stopped for want of room for its contact pairs replaced by its fold
+    alone (:func:`~origami_jax.fold`, which grows the room): the same problem, start and
+    reach, solved directly."""
+    for k, r in enumerate(results):
+        if r is None or r.status != Status.CONTACT_OVERFLOW:
+            continue
+        problem = members[k].problem
+        results[k] = fold(
+            members[k].pattern,
+            solver=solver,
+            tol=tol,
+            max_iter=max_iter,
+            dtype=dtype,
+            max_time=max_time,
+            params=problem.params._replace(contact=None),
+            start=problem.start,
+            path="direct",
+            contact=float(problem.params.contact.dhat),
+        )
+
+
 def _queue_order(group: list[_Member]) -> list[_Member]:
     """The order in which :func:`_run_group` queues a group's problems: those that fold
     furthest first (:func:`_fold_extents`), ties in input order."""
     return sorted(group, key=lambda m: m.extent, reverse=True)
 
 
-def _check_same_problems(members, solver: Solver, dtype, max_iter, max_time, share) -> None:
+def _check_same_problems(
+    members, solver: Solver, dtype, max_iter, max_time, share, contact
+) -> None:
     """Raise ValueError in every process unless every process was given the same problems
     and options (a digest of each process's, exchanged: each folds a share of the list)."""
-    digest = hashlib.sha256(repr((solver.name, dtype.name, max_iter, max_time, share)).encode())
+    options = (solver.name, dtype.name, max_iter, max_time, share, contact)
+    digest = hashlib.sha256(repr(options).encode())
     for m in members:
         p, mesh = m.problem, m.pattern.mesh
         arrays = (mesh.vertices, mesh.edges, mesh.target, p.start, p.params.percent, p.tol)
@@ -1069,6 +1165,13 @@ def _result(member, to, r, out, samples, max_iter, solver, dtype, wall, compile_
     history = dict(zip(HISTORY_FIELDS, table.T, strict=True))
     tol = float(member.problem.tol)
     positions = np.asarray(out.x[r, : s.vertices], np.float64)
+    touching = {}
+    if member.problem.structure.contact is not None:  # at the positions, over their pairs
+        params = jax.tree.map(lambda a: np.asarray(a, dtype), member.problem.params)
+        pairs = pairs_within(
+            positions, member.problem.structure.contact, float(params.contact.dhat)
+        )
+        touching = contact_summary(positions, pairs, params)
     return FoldResult(
         pattern=member.pattern,
         positions=positions,
@@ -1084,5 +1187,6 @@ def _result(member, to, r, out, samples, max_iter, solver, dtype, wall, compile_
         compile_time=compile_time,
         history=history,
         barriers=s.barriers,
+        **touching,
         **metrics,
     )

@@ -56,7 +56,8 @@ cell they cover; cells are keyed exactly, or hashed on a grid too large for 31-b
 vertex and a triangle are candidates when the vertex lies in the triangle's inflated box; two
 edges when their boxes, each inflated by half the radius, overlap (each pair made once, in the
 cell at the larger of their boxes' lowest cells). Pairs whose vertices share a group (the same
-vertex, or copies of one made by a cut) are left out. Everything is sorts, running sums,
+vertex, or copies of one made by a cut) are left out, and so are those with an inert vertex
+(a negative group: a padded problem's padding). Everything is sorts, running sums,
 scatters and binary searches: ``O(n log n)`` in the primitives and linear in the candidates,
 nothing quadratic. Too small a capacity is reported (:attr:`ContactPairs.did_overflow` and
 the capacities it would have needed); :func:`reallocate` builds again on the host with room
@@ -411,7 +412,8 @@ class ContactMesh:
     """The static structure contact sees: ``triangles`` (T, 3) and ``edges`` (E, 2) vertex
     indices (int32), and ``groups`` (V,) one id per vertex: two primitives with vertices of one
     group share a vertex and are never a pair (a vertex and its copies made by a cut, which sit
-    at the same place at rest)."""
+    at the same place at rest). A vertex of a negative group is inert: no primitive that has it
+    is in any pair (the padding of :mod:`origami_jax.padding`)."""
 
     triangles: Array
     edges: Array
@@ -863,6 +865,8 @@ def _point_triangle_candidates(x, mesh, grid, t_lo, t_hi, capacity):
         & _same_cells(grid, cv[v], cell[which])
         & jnp.all((t_lo[t] <= x[v]) & (x[v] <= t_hi[t]), axis=1)
         & jnp.all(g[v][:, None] != g[tri[t]], axis=1)
+        & (g[v] >= 0)
+        & jnp.all(g[tri[t]] >= 0, axis=1)
     )
     mask, (v, t), count = _compact(keep, capacity.pt, v, t)
     return mask, v, t, jnp.stack([n_entries, n_raw, count])
@@ -907,6 +911,8 @@ def _edge_edge_candidates(x, mesh, half, capacity):
         & _same_cells(grid, cell[which], cell[other])
         & jnp.all((lo[a] <= hi[b]) & (lo[b] <= hi[a]), axis=1)
         & jnp.all(g[a][:, :, None] != g[b][:, None, :], axis=(1, 2))
+        & jnp.all(g[a] >= 0, axis=1)
+        & jnp.all(g[b] >= 0, axis=1)
     )
     mask, (a, b), count = _compact(keep, capacity.ee, jnp.minimum(a, b), jnp.maximum(a, b))
     return mask, a, b, jnp.stack([n_entries, n_raw, count])
@@ -1062,10 +1068,11 @@ def all_pairs(mesh: ContactMesh, x: Array | None = None) -> ContactPairs:
     tri, edges, g = (np.asarray(a) for a in (mesh.triangles, mesh.edges, mesh.groups))
     v, t = np.meshgrid(np.arange(len(g)), np.arange(len(tri)), indexing="ij")
     v, t = v.ravel(), t.ravel()
-    keep = (g[v][:, None] != g[tri[t]]).all(axis=1)
+    keep = (g[v][:, None] != g[tri[t]]).all(axis=1) & (g[v] >= 0) & (g[tri[t]] >= 0).all(axis=1)
     v, t = v[keep], t[keep]
     a, b = np.triu_indices(len(edges), k=1)
     keep = (g[edges[a]][:, :, None] != g[edges[b]][:, None, :]).all(axis=(1, 2))
+    keep &= (g[edges[a]] >= 0).all(axis=1) & (g[edges[b]] >= 0).all(axis=1)
     a, b = a[keep], b[keep]
     x = np.zeros((len(g), 3)) if x is None else np.asarray(x)
     return ContactPairs(

@@ -27,6 +27,7 @@ from origami_jax.barrier import HINGE_GAP
 from origami_jax.caches import LruCache
 from origami_jax.contact import (
     Capacity,
+    ContactMesh,
     all_pairs,
     allocate,
     contact_energy,
@@ -188,7 +189,7 @@ class FoldResult:
         x = np.asarray(self.positions)
         if self.contact_dhat is None:
             return np.zeros_like(x)
-        pairs = _pairs_within(x, contact_mesh(self.pattern.mesh), self.contact_dhat)
+        pairs = pairs_within(x, contact_mesh(self.pattern.mesh), self.contact_dhat)
         grad = _contact_gradient(jnp.asarray(x), pairs, self.contact_dhat, self.contact_kappa)
         return -np.asarray(grad, np.float64)
 
@@ -891,21 +892,38 @@ def with_contact(
 ) -> tuple[Structure, FoldParams]:
     """A scene with self-contact (host side): the structure with its
     :class:`~origami_jax.contact.ContactMesh` and pair capacity, the parameters with
-    :class:`~origami_jax.energy.ContactParams`.
+    :class:`~origami_jax.energy.ContactParams` (:func:`contact_settings`; capacities of
+    :func:`contact_capacity` at ``start``, default the flat sheet, or grown from
+    ``capacity``)."""
+    cmesh, contact = contact_settings(mesh, params, dhat)
+    x0 = np.asarray(mesh.vertices if start is None else start, np.float64)
+    capacity = contact_capacity(cmesh, x0, float(contact.dhat + contact.skin), capacity)
+    dtype = params.rest_length.dtype
+    structure = replace(
+        structure, contact=jax.tree.map(jnp.asarray, cmesh), contact_capacity=capacity
+    )
+    return structure, params._replace(
+        contact=jax.tree.map(lambda v: jnp.asarray(v, dtype), contact)
+    )
+
+
+def contact_settings(
+    mesh, params: FoldParams, dhat: float | None = None
+) -> tuple[ContactMesh, ContactParams]:
+    """The :class:`~origami_jax.contact.ContactMesh` of ``mesh`` and the
+    :class:`~origami_jax.energy.ContactParams` of a scene with self-contact (host values).
 
     ``dhat`` (default :func:`~origami_jax.contact.default_dhat`, 1e-3 of the flat sheet's
     diameter, or half the least distance between two primitives of the flat sheet that share no
     vertex, if less: a sheet at rest has no pair in reach); the skin :data:`CONTACT_SKIN`
     median triangle altitudes; the barrier's weight
-    :func:`~origami_jax.contact.contact_stiffness`; capacities for every pair of a sheet with
-    at most :data:`CONTACT_ALL_PAIRS`, else for :data:`CONTACT_ROOM` times the pairs of the
-    start (or grown from ``capacity``)."""
+    :func:`~origami_jax.contact.contact_stiffness`."""
     flat = np.asarray(mesh.vertices, np.float64)
     cmesh = contact_mesh(mesh)
     if dhat is None:
         extent = flat.max(axis=0) - flat.min(axis=0)
         dhat = default_dhat(float(np.linalg.norm(extent)))
-        at_rest = _pairs_within(flat, cmesh, dhat)
+        at_rest = pairs_within(flat, cmesh, dhat)
         clearance = float(_contact_report(flat, at_rest, dhat).min_ratio) * dhat
         if clearance < dhat:
             if not clearance > 0:
@@ -915,7 +933,16 @@ def with_contact(
                 )
             dhat = 0.5 * clearance
     skin = CONTACT_SKIN * 2.0 * default_max_step(mesh)
-    x0 = flat if start is None else np.asarray(start, np.float64)
+    kappa = float(contact_stiffness(params))
+    return cmesh, ContactParams(float(dhat), kappa, float(skin))
+
+
+def contact_capacity(
+    cmesh: ContactMesh, x0: np.ndarray, radius: float, capacity: Capacity | None = None
+) -> Capacity:
+    """Capacities for the candidate pairs of a solve from positions ``x0`` within ``radius``:
+    for every pair of a sheet with at most :data:`CONTACT_ALL_PAIRS`, else for
+    :data:`CONTACT_ROOM` times the pairs of ``x0`` (or grown from ``capacity``)."""
     if capacity is None and _few_pairs(cmesh):
         # room for every pair at once, and for boxes over 16 cells each (the most the broad
         # phase's grid gives on average): a small sheet's pairs never outgrow it (a fold that
@@ -923,16 +950,8 @@ def with_contact(
         t, e = len(cmesh.triangles), len(cmesh.edges)
         pt, ee = cmesh.num_vertices * t, e * (e - 1) // 2
         # (an edge pair can be met in several cells before the exact test: raw room to spare)
-        capacity = Capacity(16 * t, 4 * pt, pt, 16 * e, 16 * ee, ee)
-    pairs = allocate(x0, cmesh, dhat + skin, capacity, multiplier=CONTACT_ROOM)
-    dtype = params.rest_length.dtype
-    contact = ContactParams(
-        *(jnp.asarray(v, dtype) for v in (dhat, contact_stiffness(params), skin))
-    )
-    structure = replace(
-        structure, contact=jax.tree.map(jnp.asarray, cmesh), contact_capacity=pairs.capacity
-    )
-    return structure, params._replace(contact=contact)
+        return Capacity(16 * t, 4 * pt, pt, 16 * e, 16 * ee, ee)
+    return allocate(x0, cmesh, radius, capacity, multiplier=CONTACT_ROOM).capacity
 
 
 def _few_pairs(cmesh) -> bool:
@@ -941,7 +960,7 @@ def _few_pairs(cmesh) -> bool:
     return v * t + e * (e - 1) // 2 <= CONTACT_ALL_PAIRS
 
 
-def _pairs_within(x: np.ndarray, cmesh, dhat: float):
+def pairs_within(x: np.ndarray, cmesh, dhat: float):
     """Candidate pairs of positions ``x`` that hold every pair within ``dhat``: a small sheet's
     every pair, from the host (a broad phase compiles, seconds), else the broad phase's."""
     return all_pairs(cmesh, x) if _few_pairs(cmesh) else allocate(x, cmesh, dhat)

@@ -9,6 +9,8 @@ by construction, with no mask in any kernel:
   energy, no force, no fold-angle error;
 * padded triangles lie on three padded vertices, their sides the padding bar (of zero
   stiffness: no barrier weight);
+* with self-contact, padded contact triangles and edges lie on padded vertices, and those are
+  inert to contact (a negative group): they are in no pair;
 
 so every energy, gradient, Hessian and maximum over a padded problem equals that of the
 problem alone, and means are rescaled to the real counts (:func:`unpad_metrics`).
@@ -23,6 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from origami_jax.contact import ContactMesh
 from origami_jax.energy import NO_BARRIERS, Barriers, Reference, Stiffness
 from origami_jax.pattern import CreasePattern
 from origami_jax.solvers.base import Problem, rigid_gauge
@@ -54,7 +57,8 @@ _PAD_NORMAL = (0.0, 0.0, 1.0)
 class Sizes(NamedTuple):
     """The array sizes of a problem: vertices, bars, driven creases, facet creases, free
     hinges, pinned vertices and barrier triangles, and the barriers built (the static shapes
-    and settings a compiled solve depends on)."""
+    and settings a compiled solve depends on); with self-contact, the contact mesh's triangles
+    and edges (0 without)."""
 
     vertices: int
     bars: int
@@ -64,6 +68,8 @@ class Sizes(NamedTuple):
     pinned: int
     triangles: int = 0
     barriers: Barriers = NO_BARRIERS
+    contact_triangles: int = 0
+    contact_edges: int = 0
 
 
 def round_up(n: int, per_octave: int = 1) -> int:
@@ -117,6 +123,8 @@ def bucket(sizes: Sizes, per_octave: int = 1, floors: Floors = BATCH_FLOORS) -> 
         pinned=up(sizes.pinned),
         triangles=max(up(sizes.triangles), floors.triangles * vertices) if sizes.triangles else 0,
         barriers=sizes.barriers,
+        contact_triangles=up(sizes.contact_triangles),
+        contact_edges=up(sizes.contact_edges),
     )
 
 
@@ -157,6 +165,7 @@ def problem_sizes(pattern: CreasePattern) -> Sizes:
 def sizes_of(problem: Problem) -> Sizes:
     """The :class:`Sizes` of a (not yet padded) problem."""
     s = problem.structure
+    contact = s.contact
     return Sizes(
         problem.start.shape[0],
         s.bars.shape[0],
@@ -166,6 +175,8 @@ def sizes_of(problem: Problem) -> Sizes:
         problem.pinned.shape[0],
         s.triangles.shape[0],
         s.barriers,
+        0 if contact is None else contact.triangles.shape[0],
+        0 if contact is None else contact.edges.shape[0],
     )
 
 
@@ -228,6 +239,20 @@ def pad_problem(problem: Problem, s: Sizes, to: Sizes) -> Problem:
         triangle_bars=_pad_rows(st.triangle_bars, to.triangles, [s.bars] * 3).astype(np.int32),
         num_creases=to.creases,
     )
+    if st.contact is not None:
+        # padded contact primitives lie on the padding vertices, whose negative group makes
+        # them inert: no pair has one (origami_jax.contact.ContactMesh)
+        c = st.contact
+        structure = replace(
+            structure,
+            contact=ContactMesh(
+                triangles=_pad_rows(c.triangles, to.contact_triangles, pad_hinge[:3]).astype(
+                    np.int32
+                ),
+                edges=_pad_rows(c.edges, to.contact_edges, pad_bar).astype(np.int32),
+                groups=_pad_rows(c.groups, to.vertices, -1).astype(np.int32),
+            ),
+        )
     k = per_element(prm.stiffness, s)
     stiffness = Stiffness(
         axial=_pad_rows(k.axial, to.bars, 0.0),
