@@ -271,7 +271,9 @@ def report(rows: list[dict], machine: str) -> str:
     """The markdown of ``scale_results.md``."""
     gib = 2.0**30
     v = [r["vertices"] for r in rows]
-    intercept, slope = linear_fit(v, [r["peak_rss_bytes"] for r in rows])
+    # a line needs two sizes: with one, no fixed part is taken off the bytes per vertex
+    fitted = len(set(v)) >= 2
+    intercept, slope = linear_fit(v, [r["peak_rss_bytes"] for r in rows]) if fitted else (0, 0)
     big = rows[-3:] if len(rows) >= 3 else rows
     vb = [r["vertices"] for r in big]
     lines = [
@@ -297,12 +299,18 @@ def report(rows: list[dict], machine: str) -> str:
             f"{r['fold_angle_error_max']:.1e} | {r['shape_error']:.1e} | "
             f"{r['peak_rss_bytes'] / gib:.2f} | {per_vertex:,.0f} |"
         )
-    lines += [
-        "",
+    memory = (
         f"Peak resident memory against vertices, least squares: **{slope:,.0f} bytes per "
         f"vertex** plus {intercept / gib:.2f} GiB (JAX, the compiled solver, the process). The "
-        "last column: each fold's peak less that fixed part, per vertex. `fold()` s: the "
-        "whole call (compile, solve, and the host's set-up of the Hessian's layout and order).",
+        "last column: each fold's peak less that fixed part, per vertex."
+        if fitted
+        else "One size: no line through peak memory against vertices; the last column is the "
+        "whole peak per vertex."
+    )
+    lines += [
+        "",
+        memory + " `fold()` s: the whole call (compile, solve, and the host's set-up of the "
+        "Hessian's layout and order).",
         "",
         "Per iteration (seconds; the split of the solve time, see the script's docstring: "
         "factorization = the backend's analysis and numeric factorizations, solve = its "
@@ -370,7 +378,9 @@ def plot(rows: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     v = [r["vertices"] for r in rows]
-    intercept, slope = linear_fit(v, [r["peak_rss_bytes"] for r in rows])
+    # a line needs two sizes: with one, no fixed part is taken off the bytes per vertex
+    fitted = len(set(v)) >= 2
+    intercept, slope = linear_fit(v, [r["peak_rss_bytes"] for r in rows]) if fitted else (0, 0)
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
     left.loglog(v, [r["peak_rss_bytes"] / 2**30 for r in rows], "o-", label="peak RSS")
     left.loglog(v, [(intercept + slope * u) / 2**30 for u in v], "--", label="linear fit")
