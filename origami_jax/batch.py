@@ -431,7 +431,7 @@ def fold_batch(
     plan = []
     for (to, topology), group in groups.items():
         if contact is not False:
-            group = _with_capacity(group, to, solver_obj)
+            group = _with_capacity(group, to)
         size = _chunk_size(chunk_size, len(group), solver_obj, to, devices)
         plan.append((to, group, size, topology is not None))
 
@@ -513,7 +513,7 @@ def _with_contact(members: list[_Member], dhat: float | None) -> list[_Member]:
     return out
 
 
-def _with_capacity(group: list[_Member], to: BatchSizes, solver: Solver) -> list[_Member]:
+def _with_capacity(group: list[_Member], to: BatchSizes) -> list[_Member]:
     """The members of one bucket, each with the contact pairs' capacity that holds every
     member's at its start (:func:`~origami_jax.fold.contact_capacity` of the padded problems:
     the compiled solve has one)."""
