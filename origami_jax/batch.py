@@ -9,6 +9,8 @@ bucket. Padding is inert by construction, with no mask in any kernel:
   length 1 with zero stiffness: no energy, no force, no strain;
 * padded hinges lie on four padded vertices folded flat, with target 0 and zero stiffness: no
   energy, no force, no fold-angle error;
+* with self-contact (``contact=``), padded contact primitives lie on padded vertices, which are
+  inert to contact (:mod:`origami_jax.padding`): no pair has one;
 
 so every energy, gradient, Hessian and maximum over a padded problem equals that of the
 problem alone (means are rescaled to the real counts on the host). Results come back unpadded,
