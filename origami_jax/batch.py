@@ -64,7 +64,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from origami_jax.caches import LruCache
-from origami_jax.contact import Capacity
+from origami_jax.contact import Capacity, build_pairs
 from origami_jax.energy import (
     FoldParams,
     Stiffness,
@@ -1150,6 +1150,23 @@ def _run_group(group, to, size, shared, solver, dtype, devices, max_iter, max_ti
             out, filled, k, sample = next_out, next_filled, next_k, next_sample
 
 
+def _contact_figures(member: _Member, to: BatchSizes, x: np.ndarray, dtype) -> dict:
+    """The result's contact figures (:func:`~origami_jax.fold.contact_summary`) at the padded
+    positions ``x`` of a member with contact, over candidate pairs gathered there as its solve
+    gathers them (within ``dhat`` and the skin, on its padded contact mesh, at the bucket's
+    capacity: one compiled broad phase and report per bucket, not per pattern); where they
+    outgrow that capacity, over those of the unpadded sheet."""
+    params = jax.tree.map(lambda a: np.asarray(a, dtype), member.problem.params)
+    dhat = float(params.contact.dhat)
+    structure = pad_problem(member.problem, member.sizes, to).structure
+    radius = dhat + float(params.contact.skin)
+    pairs = build_pairs(x, structure.contact, radius, structure.contact_capacity)
+    if bool(pairs.did_overflow):
+        x = np.asarray(x[: member.sizes.vertices])
+        pairs = pairs_within(x, member.problem.structure.contact, dhat)
+    return contact_summary(x, pairs, params)
+
+
 def _result(member, to, r, out, samples, max_iter, solver, dtype, wall, compile_time):
     """Queue row ``r``'s result, unpadded; ``samples``: its slot's samples between calls."""
     s = member.sizes
@@ -1168,12 +1185,8 @@ def _result(member, to, r, out, samples, max_iter, solver, dtype, wall, compile_
     tol = float(member.problem.tol)
     positions = np.asarray(out.x[r, : s.vertices], np.float64)
     touching = {}
-    if member.problem.structure.contact is not None:  # at the positions, over their pairs
-        params = jax.tree.map(lambda a: np.asarray(a, dtype), member.problem.params)
-        pairs = pairs_within(
-            positions, member.problem.structure.contact, float(params.contact.dhat)
-        )
-        touching = contact_summary(positions, pairs, params)
+    if member.problem.structure.contact is not None:
+        touching = _contact_figures(member, to, out.x[r], dtype)
     return FoldResult(
         pattern=member.pattern,
         positions=positions,
