@@ -842,6 +842,13 @@ def _rows(keep: Array, size: int) -> tuple[Array, Array]:
     return idx, jnp.arange(size) < jnp.sum(keep, dtype=jnp.int32)
 
 
+def _pairable(ga: Array, gb: Array) -> Array:
+    """(n,) whether two primitives, their vertices' groups ``ga`` (n, i) and ``gb`` (n, j), may
+    be a pair: no group in common and none negative (inert). NumPy or JAX arrays alike."""
+    apart = (ga[:, :, None] != gb[:, None, :]).all(axis=(1, 2))
+    return apart & (ga >= 0).all(axis=1) & (gb >= 0).all(axis=1)
+
+
 def _point_triangle_candidates(x, mesh, grid, t_lo, t_hi, capacity):
     tri = mesh.triangles
     cv = _cells(grid, x)
@@ -864,9 +871,7 @@ def _point_triangle_candidates(x, mesh, grid, t_lo, t_hi, capacity):
         raw
         & _same_cells(grid, cv[v], cell[which])
         & jnp.all((t_lo[t] <= x[v]) & (x[v] <= t_hi[t]), axis=1)
-        & jnp.all(g[v][:, None] != g[tri[t]], axis=1)
-        & (g[v] >= 0)
-        & jnp.all(g[tri[t]] >= 0, axis=1)
+        & _pairable(g[v][:, None], g[tri[t]])
     )
     mask, (v, t), count = _compact(keep, capacity.pt, v, t)
     return mask, v, t, jnp.stack([n_entries, n_raw, count])
@@ -910,9 +915,7 @@ def _edge_edge_candidates(x, mesh, half, capacity):
         & ((home[which] | home[other]) == 7)
         & _same_cells(grid, cell[which], cell[other])
         & jnp.all((lo[a] <= hi[b]) & (lo[b] <= hi[a]), axis=1)
-        & jnp.all(g[a][:, :, None] != g[b][:, None, :], axis=(1, 2))
-        & jnp.all(g[a] >= 0, axis=1)
-        & jnp.all(g[b] >= 0, axis=1)
+        & _pairable(g[a], g[b])
     )
     mask, (a, b), count = _compact(keep, capacity.ee, jnp.minimum(a, b), jnp.maximum(a, b))
     return mask, a, b, jnp.stack([n_entries, n_raw, count])
@@ -1068,11 +1071,10 @@ def all_pairs(mesh: ContactMesh, x: Array | None = None) -> ContactPairs:
     tri, edges, g = (np.asarray(a) for a in (mesh.triangles, mesh.edges, mesh.groups))
     v, t = np.meshgrid(np.arange(len(g)), np.arange(len(tri)), indexing="ij")
     v, t = v.ravel(), t.ravel()
-    keep = (g[v][:, None] != g[tri[t]]).all(axis=1) & (g[v] >= 0) & (g[tri[t]] >= 0).all(axis=1)
+    keep = _pairable(g[v][:, None], g[tri[t]])
     v, t = v[keep], t[keep]
     a, b = np.triu_indices(len(edges), k=1)
-    keep = (g[edges[a]][:, :, None] != g[edges[b]][:, None, :]).all(axis=(1, 2))
-    keep &= (g[edges[a]] >= 0).all(axis=1) & (g[edges[b]] >= 0).all(axis=1)
+    keep = _pairable(g[edges[a]], g[edges[b]])
     a, b = a[keep], b[keep]
     x = np.zeros((len(g), 3)) if x is None else np.asarray(x)
     return ContactPairs(
