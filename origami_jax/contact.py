@@ -225,34 +225,32 @@ def _point_triangle_cases(p: Array, t0: Array, t1: Array, t2: Array) -> tuple[Ar
     weights ``w`` of the corners ``(p, t0, t1, t2)``: ``sum_k w_k x_k`` is the vector between
     its closest points."""
     eps = _eps(p, t0, t1, t2)
-    corners = (t0, t1, t2)
-    values = [_dot(p - t, p - t) for t in corners]
-    ok = [jnp.ones(values[0].shape, bool)] * 3
-    rows = [(1.0, -float(k == 0), -float(k == 1), -float(k == 2)) for k in range(3)]
-    for k in range(3):
-        v, inside, s = _point_line(p, corners[k], corners[(k + 1) % 3], eps)
-        values.append(v)
-        ok.append(inside)
-        row = [1.0, 0.0, 0.0, 0.0]
-        row[1 + k], row[1 + (k + 1) % 3] = s - 1.0, -s
-        rows.append(tuple(row))
+    # the three corners and the three edges (corner k to corner k + 1) side by side on one
+    # axis: one copy of each formula in the program, not three
+    a = jnp.stack([t0, t1, t2], axis=-2)
+    b = jnp.stack([t1, t2, t0], axis=-2)
+    q = p[..., None, :]
+    corner = _dot(q - a, q - a)
+    line, along, s = _point_line(q, a, b, eps)
     u, w = t1 - t0, t2 - t0
     n = jnp.cross(u, w)
     nn = _dot(n, n)
     # a triangle this thin has no plane worth the name: its edges give the same distance
     flat = nn > eps * _dot(u, u) * _dot(w, w)
-    inside = flat
-    for k in range(3):
-        a, b = corners[k], corners[(k + 1) % 3]
-        inside = inside & (_dot(jnp.cross(b - a, p - a), n) > 0.0)
+    inside = flat & jnp.all(_dot(jnp.cross(b - a, q - a), n[..., None, :]) > 0.0, axis=-1)
     h = _dot(p - t0, n)
-    values.append(h * h / _safe(nn, flat))
-    ok.append(inside)
     # the foot's barycentric coordinates on t1 and t2
     b1 = jnp.where(flat, _dot(jnp.cross(p - t0, w), n) / _safe(nn, flat), 0.0)
     b2 = jnp.where(flat, _dot(jnp.cross(u, p - t0), n) / _safe(nn, flat), 0.0)
+    rows = [(1.0, -float(k == 0), -float(k == 1), -float(k == 2)) for k in range(3)]
+    for k in range(3):
+        row = [1.0, 0.0, 0.0, 0.0]
+        row[1 + k], row[1 + (k + 1) % 3] = s[..., k] - 1.0, -s[..., k]
+        rows.append(tuple(row))
     rows.append((1.0, b1 + b2 - 1.0, -b1, -b2))
-    return jnp.stack(values, axis=-1), jnp.stack(ok, axis=-1), _weights(values[0].dtype, *rows)
+    values = jnp.concatenate([corner, line, (h * h / _safe(nn, flat))[..., None]], axis=-1)
+    ok = jnp.concatenate([jnp.ones_like(along), along, inside[..., None]], axis=-1)
+    return values, ok, _weights(values.dtype, *rows)
 
 
 def _edge_edge_cases(a0: Array, a1: Array, b0: Array, b1: Array) -> tuple[Array, Array, Array]:
@@ -260,18 +258,21 @@ def _edge_edge_cases(a0: Array, a1: Array, b0: Array, b1: Array) -> tuple[Array,
     realised, and (..., 9, 4) each case's weights of the corners ``(a0, a1, b0, b1)`` (as in
     :func:`_point_triangle_cases`)."""
     eps = _eps(a0, a1, b0, b1)
-    values = [_dot(p - q, p - q) for p in (a0, a1) for q in (b0, b1)]
-    ok = [jnp.ones(values[0].shape, bool)] * 4
+    # end point to end point (a0 b0, a0 b1, a1 b0, a1 b1), then end point to the other edge
+    # (a0 and a1 to b, b0 and b1 to a), each set on one axis (one copy of each formula)
+    ends = jnp.stack([a0, a0, a1, a1], axis=-2) - jnp.stack([b0, b1, b0, b1], axis=-2)
+    corner = _dot(ends, ends)
+    q = jnp.stack([a0, a1, b0, b1], axis=-2)
+    e0 = jnp.stack([b0, b0, a0, a0], axis=-2)
+    e1 = jnp.stack([b1, b1, a1, a1], axis=-2)
+    line, along, s = _point_line(q, e0, e1, eps)
     rows = [(1.0, 0.0, -1.0, 0.0), (1.0, 0.0, 0.0, -1.0), (0.0, 1.0, -1.0, 0.0)]
     rows.append((0.0, 1.0, 0.0, -1.0))
-    for k, (p, e0, e1) in enumerate(((a0, b0, b1), (a1, b0, b1), (b0, a0, a1), (b1, a0, a1))):
-        v, inside, s = _point_line(p, e0, e1, eps)
-        values.append(v)
-        ok.append(inside)
+    for k in range(4):
         if k < 2:  # an end point of a and the edge b
-            rows.append((float(k == 0), float(k == 1), s - 1.0, -s))
+            rows.append((float(k == 0), float(k == 1), s[..., k] - 1.0, -s[..., k]))
         else:  # the edge a and an end point of b
-            rows.append((1.0 - s, s, -float(k == 2), -float(k == 3)))
+            rows.append((1.0 - s[..., k], s[..., k], -float(k == 2), -float(k == 3)))
     u, v = a1 - a0, b1 - b0
     n = jnp.cross(u, v)
     nn = _dot(n, n)
@@ -279,15 +280,15 @@ def _edge_edge_cases(a0: Array, a1: Array, b0: Array, b1: Array) -> tuple[Array,
     crossing = nn > eps * _dot(u, u) * _dot(v, v)
     w = b0 - a0
     # the lines' closest points a0 + s u and b0 + t v, in the forms accurate near parallel
-    s = _dot(jnp.cross(w, v), n)
-    t = _dot(jnp.cross(w, u), n)
-    inside = crossing & (s > 0.0) & (s < nn) & (t > 0.0) & (t < nn)
+    sa = _dot(jnp.cross(w, v), n)
+    tb = _dot(jnp.cross(w, u), n)
+    inside = crossing & (sa > 0.0) & (sa < nn) & (tb > 0.0) & (tb < nn)
     h = _dot(w, n)
-    values.append(h * h / _safe(nn, crossing))
-    ok.append(inside)
-    s, t = (jnp.where(crossing, z / _safe(nn, crossing), 0.0) for z in (s, t))
-    rows.append((1.0 - s, s, t - 1.0, -t))
-    return jnp.stack(values, axis=-1), jnp.stack(ok, axis=-1), _weights(values[0].dtype, *rows)
+    sa, tb = (jnp.where(crossing, z / _safe(nn, crossing), 0.0) for z in (sa, tb))
+    rows.append((1.0 - sa, sa, tb - 1.0, -tb))
+    values = jnp.concatenate([corner, line, (h * h / _safe(nn, crossing))[..., None]], axis=-1)
+    ok = jnp.concatenate([jnp.ones_like(along), along, inside[..., None]], axis=-1)
+    return values, ok, _weights(values.dtype, *rows)
 
 
 def _classify(values: Array, ok: Array) -> Array:
