@@ -90,6 +90,7 @@ __all__ = [
     "Progress",
     "Solver",
     "SolverState",
+    "check_options",
     "accept",
     "run_steps",
     "make_problem",
@@ -293,6 +294,29 @@ class SolverState(Protocol):
     status: Array  # int32 Status
 
     def _replace(self, **fields: Any) -> SolverState: ...
+
+
+def check_options(
+    solver: Solver,
+    at_least: dict[str, float] | None = None,
+    above: dict[str, float] | None = None,
+    counts: tuple[str, ...] = (),
+) -> None:
+    """Refuse a solver's option out of its range with a ``ValueError`` naming it: each option in
+    ``at_least`` must be a number at or above its bound, each in ``above`` strictly above it
+    (NaN is neither), and each in ``counts`` an integer."""
+    kind = type(solver).__name__
+    for bounds, strict in ((at_least or {}, False), (above or {}, True)):
+        for option, bound in bounds.items():
+            value = getattr(solver, option)
+            number = isinstance(value, (int, float, np.integer, np.floating))
+            number = number and not isinstance(value, bool)
+            whole = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+            if option in counts and not whole:
+                raise ValueError(f"{kind} option {option} must be an integer, got {value!r}")
+            if not (number and (value > bound if strict else value >= bound)):
+                sign = ">" if strict else ">="
+                raise ValueError(f"{kind} option {option} must be {sign} {bound}, got {value!r}")
 
 
 class Solver(ABC):

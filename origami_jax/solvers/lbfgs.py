@@ -23,6 +23,7 @@ from origami_jax.solvers.base import (
     Solver,
     Status,
     accept,
+    check_options,
     contact_limit,
     gauge,
     has_converged,
@@ -89,6 +90,10 @@ class Lbfgs(Solver):
     name: str = "lbfgs"
     # it bounds its steps among contact pairs (fold(contact=...))
     supports_contact: ClassVar[bool] = True
+
+    def __post_init__(self):
+        counts = ("memory_size", "max_linesearch_steps", "max_stalls", "patience")
+        check_options(self, at_least=dict.fromkeys(counts, 1), counts=counts)
 
     def _optimizer(self, max_step=1.0, fraction=None) -> optax.GradientTransformationExtraArgs:
         # with contact, ``fraction`` keeps the step within the skin and short of any face (in

@@ -95,6 +95,7 @@ from origami_jax.solvers.base import (
     Solver,
     Status,
     barrier_limit,
+    check_options,
     contact_clear,
     contact_limit,
     contact_skin,
@@ -398,6 +399,16 @@ class Newton(Solver):
     def __post_init__(self):
         if self.linear_solver not in ("auto", "dense", "sparse"):
             raise ValueError(f"unknown linear solver {self.linear_solver!r} (auto, dense, sparse)")
+        counts = ("dense_max", "expansions", "shift_after", "max_linesearch_steps")
+        counts += ("max_stalls", "patience")
+        at_least = dict.fromkeys(("dense_max", "expansions"), 0)
+        at_least.update(dict.fromkeys(("shift_after", "max_linesearch_steps"), 1))
+        at_least.update(dict.fromkeys(("max_stalls", "patience"), 1))
+        for option in ("mu_min", "acceleration", "free_turn", "convex_rate", "shift_min"):
+            at_least[option] = 0.0
+        at_least["buckling_far"] = 0.0
+        above = dict.fromkeys(("max_turn", "buckling_ratio"), 0.0)
+        check_options(self, at_least=at_least, above=above, counts=counts)
 
     def prepare(self, problem: Problem, mesh: Mesh) -> Problem:
         """Attach the Hessian layout (host side, before ``jit``)."""
