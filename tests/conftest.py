@@ -1,6 +1,7 @@
 """Tests run in float64 (float32 is asked for explicitly where tested)."""
 
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -18,7 +19,12 @@ if not os.environ.get("ORIGAMI_JAX_TEST_XLA_DEFAULTS"):
 # One compilation cache for the whole run, set before pytest-xdist starts its workers and
 # inherited by them and by the notebooks' kernels: a program compiled by one test (a solver
 # for the seed's scene, say) is read back, not compiled again, by the next process that needs it.
-os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", tempfile.mkdtemp(prefix="origami-jax-jit-"))
+# Made by the process that starts the run (the workers inherit it), which removes it at the end.
+_CACHE_DIR = None
+if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+    _CACHE_DIR = os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(
+        prefix="origami-jax-jit-"
+    )
 os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.5")
 
 # One BLAS thread per worker: pytest-xdist runs a worker per core, and OpenBLAS's threads spin
@@ -60,3 +66,9 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.path.stem != "test_notebooks":
             item.add_marker(pytest.mark.xdist_group(item.path.stem))
+
+
+def pytest_unconfigure(config):
+    """The run's compilation cache is removed by the process that made it."""
+    if _CACHE_DIR is not None:
+        shutil.rmtree(_CACHE_DIR, ignore_errors=True)
